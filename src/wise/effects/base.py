@@ -1,0 +1,92 @@
+"""The base class of all effects: declared parameters, presets, stage checkpointing."""
+
+from __future__ import annotations
+
+from typing import Callable, ClassVar, Mapping
+
+import torch
+from torch import nn
+from torch.utils.checkpoint import checkpoint as _checkpoint
+
+from wise import params as P
+from wise.errors import WiseError
+from wise.params import ParamSpec
+
+
+class Effect(nn.Module):
+    """A differentiable stylization pipeline with declared parameters.
+
+    Subclasses set ``name``, ``param_specs`` and ``presets`` (real units) and
+    implement :meth:`render`, which receives each parameter in real units as a
+    ``(B, 1, 1, 1)`` (global) or ``(B, 1, H, W)`` (local) tensor.
+
+    Args:
+        kernel_size: D, the number of bilinear samples on each side of a pixel in the
+            structure-adaptive filters (quality/speed trade-off; memory does not grow with D).
+        checkpoint: recompute each pipeline stage during backward instead of keeping
+            its intermediate tensors (less memory, a little more time).
+    """
+
+    name: ClassVar[str]
+    param_specs: ClassVar[tuple[ParamSpec, ...]]
+    presets: ClassVar[Mapping[str, Mapping[str, float]]] = {}
+
+    def __init__(self, kernel_size: int = 3, checkpoint: bool = False) -> None:
+        super().__init__()
+        if not isinstance(kernel_size, int) or kernel_size < 1:
+            raise WiseError(f"kernel size must be a positive integer, got {kernel_size!r}")
+        self.kernel_size = kernel_size
+        self.checkpoint = checkpoint
+
+    @property
+    def param_names(self) -> list[str]:
+        return [s.name for s in self.param_specs]
+
+    def spec(self, name: str) -> ParamSpec:
+        for s in self.param_specs:
+            if s.name == name:
+                return s
+        raise WiseError(f"effect {self.name!r} has no parameter {name!r}; its parameters: {', '.join(self.param_names)}")
+
+    def default_params(self) -> torch.Tensor:
+        """The defaults as a ``(P,)`` normalized tensor."""
+        return P.from_dict(self.param_specs, {})
+
+    def preset(self, name: str) -> torch.Tensor:
+        """A preset as a ``(P,)`` normalized tensor."""
+        if name not in self.presets:
+            known = ", ".join(self.presets) or "none"
+            raise WiseError(f"effect {self.name!r} has no preset {name!r}; its presets: {known}")
+        return P.from_dict(self.param_specs, self.presets[name])
+
+    def params_from_dict(self, values: Mapping[str, float], preset: str | None = None) -> torch.Tensor:
+        """A ``(P,)`` normalized tensor from real values; the rest from ``preset`` or the defaults."""
+        base = self.presets[preset] if preset is not None else None
+        if preset is not None and preset not in self.presets:
+            self.preset(preset)  # raises the error naming the known presets
+        return P.from_dict(self.param_specs, values, base=base)
+
+    def params_to_dict(self, params: torch.Tensor) -> dict[str, float]:
+        return P.to_dict(self.param_specs, params)
+
+    def forward(self, image: torch.Tensor, params: torch.Tensor) -> torch.Tensor:
+        """Stylize ``image`` (B, 3, H, W) in [0, 1] with normalized ``params`` (B, P) or (B, P, h, w)."""
+        if not isinstance(image, torch.Tensor) or image.dim() != 4 or image.shape[1] != 3:
+            shape = tuple(image.shape) if isinstance(image, torch.Tensor) else type(image).__name__
+            raise WiseError(f"image must be a (B, 3, H, W) tensor, got {shape}")
+        if not image.is_floating_point():
+            raise WiseError(f"image must be a float tensor in [0, 1], got {image.dtype}")
+        if min(image.shape[-2:]) < 8:
+            raise WiseError(f"image is too small ({image.shape[-2]}x{image.shape[-1]}); both sides must be at least 8 pixels")
+        params = P.check_params(params, self.param_specs, image.shape[0]).to(image)
+        values = P.real_maps(params, self.param_specs, tuple(image.shape[-2:]))
+        return self.render(image, values)
+
+    def render(self, image: torch.Tensor, p: Mapping[str, torch.Tensor]) -> torch.Tensor:
+        raise NotImplementedError
+
+    def stage(self, fn: Callable[..., torch.Tensor], *args: object, **kwargs: object) -> torch.Tensor:
+        """Run one pipeline stage, checkpointed when ``self.checkpoint`` is set."""
+        if self.checkpoint and torch.is_grad_enabled():
+            return _checkpoint(fn, *args, use_reentrant=False, **kwargs)
+        return fn(*args, **kwargs)

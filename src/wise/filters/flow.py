@@ -1,0 +1,54 @@
+"""Helpers for filters that sample along a direction field."""
+
+from __future__ import annotations
+
+import torch
+
+from wise.filters._checks import check_image
+from wise.filters.sampling import offset_grid, sample_at_grid
+
+
+def check_direction(direction: torch.Tensor, image: torch.Tensor, name: str = "direction") -> None:
+    check_image(direction, name=name, channels=2)
+    if direction.shape[0] not in (1, image.shape[0]) or direction.shape[-2:] != image.shape[-2:]:
+        raise ValueError(f"{name} {tuple(direction.shape)} does not match the image {tuple(image.shape)}")
+
+
+def pixel_step(direction: torch.Tensor) -> torch.Tensor:
+    """Distance travelled along the unit ``direction`` (B, 2, H, W) per pixel of its major axis.
+
+    Stepping ``k * pixel_step`` along the direction moves exactly ``k`` pixels along the
+    axis the direction is closer to, so every sample lands on a pixel row or column.
+    Returns ``(B, 1, H, W)`` values in [1, sqrt(2)].
+    """
+    return 1.0 / direction.abs().amax(dim=1, keepdim=True).clamp_min(1e-6)
+
+
+@torch.no_grad()
+def trace_streamlines(tangent: torch.Tensor, steps: int, step_length: float = 1.0) -> list[torch.Tensor]:
+    """Sampling grids along the streamlines of ``tangent`` through every pixel, both ways.
+
+    Euler integration in unit steps; the orientation of each newly sampled tangent is
+    flipped to agree with the previous one, since a tangent field has no sign.
+
+    Args:
+        tangent: ``(B, 2, H, W)`` unit vectors.
+        steps: number of steps in each direction.
+
+    Returns:
+        ``2 * steps`` grids ``(B, H, W, 2)`` for :func:`sample_at_grid`: the forward
+        streamline first, then the backward one.
+    """
+    grids: list[torch.Tensor] = []
+    for sign in (1.0, -1.0):
+        heading = tangent * sign
+        offset = torch.zeros_like(tangent)
+        for _ in range(steps):
+            offset = offset + heading * step_length
+            grid = offset_grid(offset)
+            grids.append(grid)
+            sampled = sample_at_grid(tangent, grid)
+            agree = (sampled * heading).sum(dim=1, keepdim=True)
+            sampled = torch.where(agree < 0, -sampled, sampled)
+            heading = sampled / sampled.norm(dim=1, keepdim=True).clamp_min(1e-6)
+    return grids

@@ -1,0 +1,71 @@
+"""Separable Gaussian smoothing with a global or per-pixel sigma."""
+
+from __future__ import annotations
+
+import math
+
+import torch
+import torch.nn.functional as F
+
+from wise.filters._checks import ParamLike, as_map, check_image, max_value, resolution_scale
+from wise.filters.sampling import tap_sum
+
+MIN_SIGMA = 1e-3
+"""Smallest sigma (pixels) used; smaller values act as no smoothing without dividing by zero."""
+
+
+def _kernel_radius(sigma_max: float) -> int:
+    return max(1, math.ceil(2.0 * sigma_max))
+
+
+def _blur_axis_fixed(image: torch.Tensor, sigma: float, axis: int) -> torch.Tensor:
+    radius = _kernel_radius(sigma)
+    offsets = torch.arange(-radius, radius + 1, dtype=image.dtype, device=image.device)
+    kernel = torch.exp(-(offsets**2) / (2.0 * sigma**2))
+    kernel = kernel / kernel.sum()
+    channels = image.shape[1]
+    if axis == 3:
+        weight = kernel.view(1, 1, 1, -1).expand(channels, 1, 1, -1)
+        padded = F.pad(image, (radius, radius, 0, 0), mode="replicate")
+    else:
+        weight = kernel.view(1, 1, -1, 1).expand(channels, 1, -1, 1)
+        padded = F.pad(image, (0, 0, radius, radius), mode="replicate")
+    return F.conv2d(padded, weight, groups=channels)
+
+
+def _blur_axis_varying(image: torch.Tensor, sigma: torch.Tensor, axis: int) -> torch.Tensor:
+    radius = _kernel_radius(max_value(sigma))
+    size = image.shape[axis]
+    pad = (radius, radius, 0, 0) if axis == 3 else (0, 0, radius, radius)
+    padded = F.pad(image, pad, mode="replicate")
+
+    def tap(k: int, padded: torch.Tensor, sigma: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        shifted = padded.narrow(axis, k, size)
+        distance = float(k - radius)
+        weight = torch.exp(-(distance**2) / (2.0 * sigma**2)) * (abs(distance) <= 2.0 * sigma)
+        return weight * shifted, weight
+
+    total, norm = tap_sum(tap, 2 * radius + 1, padded, sigma)
+    return total / norm
+
+
+def gaussian_blur(image: torch.Tensor, sigma: ParamLike, scale: float | None = None) -> torch.Tensor:
+    """Separable Gaussian smoothing, truncated at two sigma.
+
+    Args:
+        image: ``(B, C, H, W)``.
+        sigma: standard deviation in pixels of a 512-pixel short side; a float, ``(B,)``
+            or a per-pixel map ``(B, 1, H, W)``.
+        scale: pixels per reference pixel; defaults to ``min(H, W) / 512`` so that the
+            result looks the same at every resolution. Pass 1.0 for plain pixels.
+
+    Returns:
+        ``(B, C, H, W)``.
+    """
+    check_image(image)
+    s = resolution_scale(image) if scale is None else scale
+    if isinstance(sigma, (int, float)):
+        pixels = max(float(sigma) * s, MIN_SIGMA)
+        return _blur_axis_fixed(_blur_axis_fixed(image, pixels, 3), pixels, 2)
+    pixels = (as_map(sigma, image, "sigma") * s).clamp_min(MIN_SIGMA)
+    return _blur_axis_varying(_blur_axis_varying(image, pixels, 3), pixels, 2)
