@@ -21,7 +21,7 @@ def pixel_step(direction: torch.Tensor) -> torch.Tensor:
     axis the direction is closer to, so every sample lands on a pixel row or column.
     Returns ``(B, 1, H, W)`` values in [1, sqrt(2)].
     """
-    return 1.0 / direction.abs().amax(dim=1, keepdim=True).clamp_min(1e-6)
+    return 1.0 / torch.maximum(direction[:, 0:1].abs(), direction[:, 1:2].abs()).clamp_min(1e-6)
 
 
 @torch.no_grad()
@@ -48,7 +48,7 @@ def trace_streamlines(tangent: torch.Tensor, steps: int, step_length: float = 1.
             grid = offset_grid(offset)
             grids.append(grid)
             sampled = sample_at_grid(tangent, grid)
-            agree = (sampled * heading).sum(dim=1, keepdim=True)
-            sampled = torch.where(agree < 0, -sampled, sampled)
-            heading = sampled / sampled.norm(dim=1, keepdim=True).clamp_min(1e-6)
+            agree = sampled[:, 0:1] * heading[:, 0:1] + sampled[:, 1:2] * heading[:, 1:2]
+            flip = 1.0 - 2.0 * (agree < 0).to(sampled.dtype)
+            heading = sampled * (flip / torch.hypot(sampled[:, 0:1], sampled[:, 1:2]).clamp_min(1e-6))
     return grids

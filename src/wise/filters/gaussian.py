@@ -12,16 +12,26 @@ from wise.filters.sampling import tap_sum
 
 MIN_SIGMA = 1e-3
 """Smallest sigma (pixels) used; smaller values act as no smoothing without dividing by zero."""
+SUPPORT = 2.0
+"""Gaussian kernels are cut off at ``SUPPORT`` sigma but always reach the nearest neighbours,
+so that a sub-pixel sigma still smooths a little and keeps a gradient."""
+
+
+def in_support(distance: torch.Tensor | float, sigma: torch.Tensor, nearest: bool) -> torch.Tensor:
+    """Mask of the samples a Gaussian of ``sigma`` uses; ``nearest`` marks the nearest neighbours."""
+    if nearest:
+        return torch.ones_like(sigma)
+    return (distance <= SUPPORT * sigma).to(sigma.dtype)
 
 
 def _kernel_radius(sigma_max: float) -> int:
-    return max(1, math.ceil(2.0 * sigma_max))
+    return max(1, math.ceil(SUPPORT * sigma_max))
 
 
 def _blur_axis_fixed(image: torch.Tensor, sigma: float, axis: int) -> torch.Tensor:
     radius = _kernel_radius(sigma)
     offsets = torch.arange(-radius, radius + 1, dtype=image.dtype, device=image.device)
-    kernel = torch.exp(-(offsets**2) / (2.0 * sigma**2))
+    kernel = torch.exp(-offsets * offsets / (2.0 * sigma * sigma)) * (offsets.abs() <= max(SUPPORT * sigma, 1.0))
     kernel = kernel / kernel.sum()
     channels = image.shape[1]
     if axis == 3:
@@ -39,13 +49,15 @@ def _blur_axis_varying(image: torch.Tensor, sigma: torch.Tensor, axis: int) -> t
     pad = (radius, radius, 0, 0) if axis == 3 else (0, 0, radius, radius)
     padded = F.pad(image, pad, mode="replicate")
 
-    def tap(k: int, padded: torch.Tensor, sigma: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    neg_inv_two_sigma_sq = -0.5 / sigma.square()
+
+    def tap(k: int, padded, sigma, neg_inv_two_sigma_sq):
         shifted = padded.narrow(axis, k, size)
         distance = float(k - radius)
-        weight = torch.exp(-(distance**2) / (2.0 * sigma**2)) * (abs(distance) <= 2.0 * sigma)
+        weight = torch.exp(distance * distance * neg_inv_two_sigma_sq) * in_support(abs(distance), sigma, abs(distance) <= 1)
         return weight * shifted, weight
 
-    total, norm = tap_sum(tap, 2 * radius + 1, padded, sigma)
+    total, norm = tap_sum(tap, 2 * radius + 1, padded, sigma, neg_inv_two_sigma_sq)
     return total / norm
 
 

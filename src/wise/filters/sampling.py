@@ -35,8 +35,8 @@ def offset_grid(offset: torch.Tensor) -> torch.Tensor:
     """
     _, _, h, w = offset.shape
     base = _identity_grid(h, w, offset.device, offset.dtype)
-    to_normalized = offset.new_tensor([2.0 / max(w - 1, 1), 2.0 / max(h - 1, 1)]).view(1, 2, 1, 1)
-    return base + (offset * to_normalized).permute(0, 2, 3, 1)
+    to_normalized = offset.new_tensor([2.0 / max(w - 1, 1), 2.0 / max(h - 1, 1)])
+    return torch.addcmul(base, offset.permute(0, 2, 3, 1), to_normalized)
 
 
 def sample_at_grid(image: torch.Tensor, grid: torch.Tensor) -> torch.Tensor:

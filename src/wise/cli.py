@@ -1,0 +1,210 @@
+"""The ``wise`` command: list effects and apply them to images.
+
+Bad input (unknown names, malformed or out-of-range values, unreadable files,
+unwritable outputs) prints one line ``wise: error: ...`` on stderr and exits
+with code 2, leaving no output file behind.
+"""
+
+from __future__ import annotations
+
+import argparse
+import inspect
+import math
+import os
+import sys
+from pathlib import Path
+from typing import NoReturn, Sequence, TextIO
+
+import torch
+
+from wise import __version__, effects
+from wise.effects.base import Effect
+from wise.errors import WiseError
+from wise.io import WRITE_FORMATS, read_image, write_image
+from wise.paramfile import load_params
+
+PROG = "wise"
+EXIT_USAGE = 2
+OUTSIDE_NOTE = "outside the declared range; rendered as authored"
+
+
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are a single ``wise: error:`` line."""
+
+    def error(self, message: str) -> NoReturn:
+        hint = f" (see '{self.prog} --help')"
+        self.exit(EXIT_USAGE, f"{PROG}: error: {_one_line(message)}{hint}\n")
+
+
+def _one_line(text: object) -> str:
+    return " ".join(str(text).split())
+
+
+def _fmt(value: float) -> str:
+    return f"{value:.6g}"
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of the ``wise`` command."""
+    parser = _Parser(prog=PROG, description="Whitebox image stylization: differentiable effects with editable parameters.")
+    parser.add_argument("--version", action="version", version=f"{PROG} {__version__}")
+    commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+
+    show = commands.add_parser("effects", help="list effects, their parameters and presets")
+    show.add_argument("effect", nargs="?", metavar="EFFECT", help="show this effect only")
+    show.set_defaults(func=_cmd_effects)
+
+    apply = commands.add_parser("apply", help="stylize an image with an effect")
+    apply.add_argument("effect", metavar="EFFECT", help="effect name (see 'wise effects')")
+    apply.add_argument("input", metavar="INPUT", help="input image (PNG, JPEG, WebP or TIFF)")
+    apply.add_argument("-o", "--output", required=True, metavar="OUTPUT", help="output image (.png, .jpg or .jpeg)")
+    apply.add_argument("--preset", metavar="NAME", help="start from this preset instead of the defaults")
+    apply.add_argument("--params", metavar="FILE", help="start from a parameter file (global or local masks)")
+    apply.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="set a parameter in real units (repeatable); with local masks it sets the whole mask",
+    )
+    apply.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto", help="default: cuda if available")
+    apply.add_argument("--kernel-size", type=int, metavar="D", help="filter samples per side (quality/speed)")
+    apply.add_argument("--quality", type=int, default=95, metavar="Q", help="JPEG quality 1-100 (default 95)")
+    apply.set_defaults(func=_cmd_apply)
+    return parser
+
+
+def _effect_table(effect: Effect) -> list[str]:
+    doc = inspect.getdoc(type(effect)) or ""
+    title = doc.splitlines()[0] if doc else ""
+    lines = [f"{effect.name}: {title}" if title else effect.name, "  parameters:"]
+    rows = [
+        (s.name, f"[{_fmt(s.min)}, {_fmt(s.max)}]", f"default {_fmt(s.default)}", s.description)
+        for s in effect.param_specs
+    ]
+    widths = [max(len(r[i]) for r in rows) for i in range(3)]
+    for row in rows:
+        cells = [row[i].ljust(widths[i]) for i in range(3)]
+        lines.append(("    " + "  ".join(cells) + "  " + row[3]).rstrip())
+    outside = False
+    if effect.presets:
+        lines.append("  presets:")
+        width = max(len(n) for n in effect.presets)
+        for name, preset in effect.presets.items():
+            values = []
+            for spec in effect.param_specs:
+                value = float(preset.get(spec.name, spec.default))
+                mark = "" if spec.in_range(value) else "*"
+                outside = outside or bool(mark)
+                values.append(f"{spec.name}={_fmt(value)}{mark}")
+            lines.append(f"    {name.ljust(width)}  {' '.join(values)}")
+    if outside:
+        lines.append(f"  * {OUTSIDE_NOTE}")
+    return lines
+
+
+def _cmd_effects(args: argparse.Namespace, out: TextIO) -> int:
+    names = [args.effect] if args.effect else effects.available()
+    blocks = ["\n".join(_effect_table(effects.create(name))) for name in names]
+    print("\n\n".join(blocks), file=out)
+    return 0
+
+
+def _device(name: str) -> torch.device:
+    if name == "cuda" and not torch.cuda.is_available():
+        raise WiseError("--device cuda: CUDA is not available; use --device cpu")
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    return torch.device(name)
+
+
+def _parse_set(item: str, effect: Effect) -> tuple[int, float]:
+    """``NAME=VALUE`` in real units to (parameter index, normalized value)."""
+    name, sep, text = item.partition("=")
+    name, text = name.strip(), text.strip()
+    if not sep or not name or not text:
+        raise WiseError(f"--set {item!r}: expected NAME=VALUE, e.g. --set {effect.param_names[0]}=0")
+    spec = effect.spec(name)
+    try:
+        value = float(text)
+    except ValueError:
+        raise WiseError(f"--set {name}={text}: {text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise WiseError(f"--set {name}={text}: the value must be a finite number")
+    if not spec.in_range(value):
+        raise WiseError(f"--set {name}={text}: outside the range [{_fmt(spec.min)}, {_fmt(spec.max)}] of {name}")
+    return effect.param_names.index(name), spec.to_normalized(value)
+
+
+def _check_output(path: Path) -> None:
+    if path.suffix.lower() not in WRITE_FORMATS:
+        raise WiseError(
+            f"{path}: cannot write {path.suffix or 'files without an extension'}; "
+            f"supported extensions: {', '.join(WRITE_FORMATS)}"
+        )
+    if path.is_dir():
+        raise WiseError(f"{path}: is a directory")
+    directory = path.parent
+    if not directory.is_dir():
+        raise WiseError(f"{path}: the directory {directory} does not exist")
+    if not os.access(directory, os.W_OK | os.X_OK):
+        raise WiseError(f"{path}: the directory {directory} is not writable")
+
+
+def _cmd_apply(args: argparse.Namespace, out: TextIO) -> int:
+    if args.params and args.preset:
+        raise WiseError("--params and --preset cannot be combined; edit the file's values with --set instead")
+    options: dict[str, object] = {}
+    if args.kernel_size is not None:
+        options["kernel_size"] = args.kernel_size
+    effect = effects.create(args.effect, **options)
+    if args.params:
+        params = load_params(args.params, effect)
+    elif args.preset:
+        params = effect.preset(args.preset).unsqueeze(0)
+    else:
+        params = effect.default_params().unsqueeze(0)
+    params = params.clone()
+    for index, value in (_parse_set(item, effect) for item in args.set):
+        params[:, index] = value
+    if not 1 <= args.quality <= 100:
+        raise WiseError(f"--quality must be from 1 to 100, got {args.quality}")
+    output = Path(args.output)
+    _check_output(output)
+    device = _device(args.device)
+    image = read_image(args.input)
+    effect = effect.to(device).eval()
+    with torch.no_grad():
+        result = effect(image.to(device), params.to(device))
+    write_image(result.cpu(), output, quality=args.quality)
+    return 0
+
+
+def _error(message: str, err: TextIO) -> None:
+    print(f"{PROG}: error: {_one_line(message)}", file=err)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the ``wise`` command with ``argv`` (default: ``sys.argv[1:]``); return the exit code."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as e:
+        return e.code if isinstance(e.code, int) else (0 if e.code is None else EXIT_USAGE)
+    try:
+        return int(args.func(args, sys.stdout))
+    except WiseError as e:
+        _error(str(e), sys.stderr)
+    except OSError as e:
+        where = f"{e.filename}: " if e.filename else ""
+        _error(f"{where}{e.strerror or e}", sys.stderr)
+    except torch.cuda.OutOfMemoryError:
+        _error("out of GPU memory; try --device cpu or a smaller image", sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        return 130
+    return EXIT_USAGE
+
+
+if __name__ == "__main__":
+    sys.exit(main())
