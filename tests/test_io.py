@@ -85,6 +85,75 @@ def test_16bit_png_keeps_precision(tmp_path: Path) -> None:
     assert float((t[0, 1] - expected).abs().max()) < 1e-6
 
 
+def write_png16(path: Path, samples: np.ndarray, exif: bytes | None = None) -> None:
+    """Write an ``H x W x C`` uint16 array (C = 2, 3 or 4) as a 16-bit PNG with pypng."""
+    import png
+
+    h, w, c = samples.shape
+    writer = png.Writer(w, h, bitdepth=16, greyscale=c < 3, alpha=c in (2, 4))
+    with path.open("wb") as f:
+        writer.write(f, samples.reshape(h, w * c).tolist())
+    if exif is not None:
+        chunks = list(png.Reader(filename=str(path)).chunks())
+        chunks.insert(1, (b"eXIf", exif))
+        with path.open("wb") as f:
+            png.write_chunks(f, chunks)
+
+
+def colour16(channels: int) -> np.ndarray:
+    """Planes of 16-bit values 8 bits cannot hold, alpha spanning 0..65535."""
+    grey = ramp16()
+    planes = [grey, grey[::-1], 65535 - grey][: 1 if channels == 2 else 3]
+    if channels in (2, 4):
+        planes.append(np.linspace(0, 65535, grey.size).round().astype(np.uint16).reshape(grey.shape) | 1)
+    return np.stack(planes, axis=-1)
+
+
+def over_white(samples: np.ndarray) -> np.ndarray:
+    """Expected ``3 x H x W`` reading: values / 65535, alpha composited over white."""
+    v = samples.astype(np.float64) / 65535
+    if v.shape[2] in (2, 4):
+        v = v[..., :-1] * v[..., -1:] + (1 - v[..., -1:])
+    return np.repeat(v, 3, axis=2).transpose(2, 0, 1) if v.shape[2] == 1 else v.transpose(2, 0, 1)
+
+
+@pytest.mark.parametrize("channels", [3, 4, 2], ids=["rgb", "rgba", "grey-alpha"])
+def test_16bit_colour_png_keeps_precision(tmp_path: Path, channels: int) -> None:
+    samples = colour16(channels)
+    write_png16(tmp_path / "c16.png", samples)
+    expected = over_white(samples)
+    eight_bit = over_white((samples / 257).round().astype(np.uint16) * 257)
+    assert np.abs(eight_bit - expected).max() > 1e-4  # the test would catch an 8-bit read
+    t = read_image(tmp_path / "c16.png")
+    assert t.shape == (1, 3, 32, 40) and t.dtype == torch.float32
+    assert float(np.abs(t[0].numpy() - expected).max()) < 1e-6
+
+
+def test_16bit_colour_png_orientation(tmp_path: Path) -> None:
+    samples = colour16(3)
+    exif = Image.Exif()
+    exif[0x0112] = 6
+    write_png16(tmp_path / "o.png", samples, exif=exif.tobytes()[6:])
+    assert Image.open(tmp_path / "o.png").getexif().get(0x0112) == 6
+    t = read_image(tmp_path / "o.png")
+    assert t.shape == (1, 3, 40, 32)
+    expected = np.rot90(over_white(samples), -1, axes=(1, 2))
+    assert float(np.abs(t[0].numpy() - expected).max()) < 1e-6
+
+
+def test_corrupt_16bit_colour_png_refused(tmp_path: Path) -> None:
+    write_png16(tmp_path / "good.png", colour16(4))
+    data = (tmp_path / "good.png").read_bytes()
+    bad = tmp_path / "bad.png"
+    bad.write_bytes(data[: len(data) // 2])
+    assert wio._needs_pypng(bad)
+    expect_error(bad, "corrupt")
+    flipped = bytearray(data)
+    flipped[len(data) // 2] ^= 0xFF
+    bad.write_bytes(bytes(flipped))
+    expect_error(bad, "corrupt")
+
+
 def test_16bit_tiff_keeps_precision(tmp_path: Path) -> None:
     grey = ramp16()
     rgb = np.stack([grey, grey[::-1], 65535 - grey], axis=-1)

@@ -2,9 +2,10 @@
 
 Reading accepts PNG, JPEG, WebP and TIFF. The EXIF orientation is applied,
 greyscale becomes RGB, and an alpha channel is composited over white (a
-transparent pixel reads as white). 16-bit greyscale PNG and TIFF and 16-bit
-colour TIFF keep their precision (values are divided by 65535); Pillow reads
-16-bit colour PNG at 8 bits.
+transparent pixel reads as white). 16-bit PNG and TIFF, greyscale or colour,
+keep their precision (values are divided by 65535): Pillow reads 16-bit colour
+PNG at 8 bits, so those are decoded with pypng and 16-bit colour TIFF with
+tifffile.
 
 Writing supports PNG and JPEG and is atomic: the image goes to a temporary
 file in the target directory that then replaces the target, so a failure never
@@ -15,6 +16,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import zlib
 import os
 import tempfile
 import warnings
@@ -34,6 +36,8 @@ WRITE_FORMATS = {".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG"}
 
 _SIXTEEN_BIT_MODES = {"I;16", "I;16L", "I;16B", "I;16N", "I"}
 _TIFF_MAGIC = (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+")
+_PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+_PNG_COLOUR_TYPES = {2, 4, 6}  # RGB, greyscale + alpha, RGBA: Pillow reads these at 8 bits
 _ORIENTATIONS: dict[int, Callable[[np.ndarray], np.ndarray]] = {
     2: lambda a: a[:, ::-1],
     3: lambda a: a[::-1, ::-1],
@@ -112,7 +116,7 @@ def _pillow_array(img: Image.Image) -> np.ndarray:
     return _to_rgb(_to_float(np.asarray(img)))
 
 
-def _tiff_orientation(path: Path) -> int:
+def _exif_orientation(path: Path) -> int:
     try:
         with Image.open(path) as img:
             return int(img.getexif().get(0x0112, 1))
@@ -144,7 +148,38 @@ def _tifffile_array(path: Path) -> np.ndarray:
     if array.ndim not in (2, 3):
         raise ValueError(f"unexpected TIFF layout {axes} {array.shape}")
     array = _to_rgb(_to_float(array))
-    orient = _ORIENTATIONS.get(_tiff_orientation(path))
+    orient = _ORIENTATIONS.get(_exif_orientation(path))
+    return np.ascontiguousarray(orient(array) if orient else array)
+
+
+def _needs_pypng(path: Path) -> bool:
+    """Whether a file is a 16-bit PNG with colour or alpha (IHDR: bit depth, colour type)."""
+    with path.open("rb") as f:
+        header = f.read(26)
+    return (
+        len(header) == 26
+        and header.startswith(_PNG_MAGIC)
+        and header[12:16] == b"IHDR"
+        and header[24] == 16
+        and header[25] in _PNG_COLOUR_TYPES
+    )
+
+
+def _pypng_array(path: Path) -> np.ndarray:
+    """A 16-bit colour PNG that Pillow would read at 8 bits, via pypng."""
+    import png
+
+    try:
+        width, height, rows, info = png.Reader(filename=str(path)).asDirect()
+        array = np.array([np.asarray(row, np.uint16) for row in rows], np.uint16)
+    except (png.Error, zlib.error) as e:
+        raise ValueError(_one_line(e)) from None
+    planes, depth = info["planes"], info["bitdepth"]
+    if array.shape != (height, width * planes):
+        raise ValueError(f"expected {height} rows of {width * planes} samples, got shape {array.shape}")
+    scaled = array.reshape(height, width, planes).astype(np.float32) / float(2**depth - 1)
+    array = _to_rgb(np.clip(scaled, 0.0, 1.0))
+    orient = _ORIENTATIONS.get(_exif_orientation(path))
     return np.ascontiguousarray(orient(array) if orient else array)
 
 
@@ -176,8 +211,11 @@ def read_image(path: PathLike) -> torch.Tensor:
                     raise WiseError(f"{path}: unsupported image format {fmt}; supported: {supported}")
                 if img.width == 0 or img.height == 0:
                     raise WiseError(f"{path}: the image is empty ({img.width}x{img.height} pixels)")
-                img.load()
-                array = _tifffile_array(path) if _needs_tifffile(img) else _pillow_array(img)
+                if fmt == "PNG" and _needs_pypng(path):
+                    array = _pypng_array(path)
+                else:
+                    img.load()
+                    array = _tifffile_array(path) if _needs_tifffile(img) else _pillow_array(img)
         except UnidentifiedImageError:
             if not _is_tiff(path):
                 supported = ", ".join(READ_FORMATS.values())

@@ -75,6 +75,8 @@ class _BilateralTaps(torch.autograd.Function):
         need_image = ctx.needs_input_grad[0]
         for j in range(1, ctx.n + 1):
             geo = _MergedSample(j, step, spatial, neg_a)
+            g_w_pair = torch.zeros_like(geo.w_pair)
+            g_offset_signed = torch.zeros_like(direction)
             for sign in (1.0, -1.0):
                 grid = offset_grid(direction * (sign * geo.distance))
                 value = sample_at_grid(image, grid)
@@ -88,22 +90,24 @@ class _BilateralTaps(torch.autograd.Function):
                 g_value = grad_total * weight + through_range
                 g_image.sub_(through_range)
                 g_neg_r.add_(g_log_range * range_sq)
-                g_w_pair = g_weight * geo.inside * range_weight
+                g_w_pair.add_(g_weight * geo.inside * range_weight)
                 g_sampled_image, g_grid = torch.ops.aten.grid_sampler_2d_backward(
                     g_value, image, grid, 0, 1, True, [need_image, True]
                 )
                 if need_image:
                     g_image.add_(g_sampled_image)
-                g_offset = g_grid.permute(0, 3, 1, 2) * pixels_per_grid_unit
-                g_direction.add_(g_offset * (sign * geo.distance))
-                g_distance = sign * (g_offset[:, 0:1] * direction[:, 0:1] + g_offset[:, 1:2] * direction[:, 1:2])
-                g_distance_per_pair = g_distance / geo.w_pair
-                g_w_near = g_w_pair + g_distance_per_pair * (geo.near - geo.distance)
-                g_w_far = g_w_pair + g_distance_per_pair * (geo.far - geo.distance)
-                g_near = g_w_near * geo.w_near * (2.0 * geo.near) * neg_a + g_distance_per_pair * geo.w_near
-                g_far = g_w_far * geo.w_far * (2.0 * geo.far) * neg_a + g_distance_per_pair * geo.w_far
-                g_neg_a.add_(g_w_near * geo.w_near * geo.near * geo.near + g_w_far * geo.w_far * geo.far * geo.far)
-                g_step.add_(g_near * geo.n_near + g_far * geo.n_far)
+                g_offset_signed.add_(g_grid.permute(0, 3, 1, 2), alpha=sign)
+            # chain rule through the sample geometry, shared by both sides
+            g_offset_signed.mul_(pixels_per_grid_unit)
+            g_direction.addcmul_(g_offset_signed, geo.distance)
+            g_distance = g_offset_signed[:, 0:1] * direction[:, 0:1] + g_offset_signed[:, 1:2] * direction[:, 1:2]
+            g_distance_per_pair = g_distance / geo.w_pair
+            g_w_near = g_w_pair + g_distance_per_pair * (geo.near - geo.distance)
+            g_w_far = g_w_pair + g_distance_per_pair * (geo.far - geo.distance)
+            g_near = g_w_near * geo.w_near * (2.0 * geo.near) * neg_a + g_distance_per_pair * geo.w_near
+            g_far = g_w_far * geo.w_far * (2.0 * geo.far) * neg_a + g_distance_per_pair * geo.w_far
+            g_neg_a.add_(g_w_near * geo.w_near * geo.near * geo.near + g_w_far * geo.w_far * geo.far * geo.far)
+            g_step.add_(g_near * geo.n_near + g_far * geo.n_far)
         return (
             g_image if need_image else None,
             g_direction if ctx.needs_input_grad[1] else None,

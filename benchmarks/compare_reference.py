@@ -1,0 +1,46 @@
+"""SSIM of our XDoG against the public reference implementation's outputs.
+
+Usage::
+
+    python benchmarks/compare_reference.py DATA_DIR
+
+``DATA_DIR`` holds ``portrait.png`` and ``reference/astronaut.png`` with the reference
+outputs ``reference/xdog_<photo>_<preset>.png`` (rendered by the reference code at full
+resolution). Prints one line per photo and preset; SSIM on the grey output at full size.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+import torch
+from PIL import Image
+from skimage.metrics import structural_similarity
+
+import wise
+from wise.io import read_image
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("data", type=Path)
+    args = parser.parse_args()
+    photos = {"portrait": args.data / "portrait.png", "astronaut": args.data / "reference" / "astronaut.png"}
+    effect = wise.effects.create("xdog")
+    print("| photo | size | preset | SSIM |")
+    print("| --- | --- | --- | --- |")
+    for photo, path in photos.items():
+        image = read_image(path)
+        for preset in effect.presets:
+            with torch.no_grad():
+                ours = effect(image, effect.preset(preset)[None])
+            ours_u8 = (ours[0, 0].clamp(0, 1) * 255).round().to(torch.uint8).numpy()
+            reference = np.asarray(Image.open(args.data / "reference" / f"xdog_{photo}_{preset}.png").convert("L"))
+            score = structural_similarity(ours_u8, reference, data_range=255)
+            print(f"| {photo} | {image.shape[-1]}×{image.shape[-2]} | {preset} | {score:.3f} |")
+
+
+if __name__ == "__main__":
+    main()
