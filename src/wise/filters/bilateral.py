@@ -9,7 +9,7 @@ import torch
 from wise.filters._checks import ParamLike, as_map, check_image, max_value, resolution_scale
 from wise.filters.flow import check_direction, pixel_step
 from wise.filters.gaussian import MIN_SIGMA, SUPPORT, in_support
-from wise.filters.sampling import offset_grid, sample, sample_at_grid
+from wise.filters.sampling import offset_grid, sample, sample_at_grid, sample_backward, sum_to
 from wise.filters.structure import gradient_direction
 
 
@@ -30,11 +30,6 @@ class _MergedSample:
         self.w_pair = (self.w_near + self.w_far).clamp_min(1e-30)
         self.distance = (self.near * self.w_near + self.far * self.w_far) / self.w_pair
         self.inside = in_support(self.near, spatial, nearest=j == 1)
-
-
-def _sum_to(grad: torch.Tensor, shape: torch.Size) -> torch.Tensor:
-    dims = [i for i, (g, s) in enumerate(zip(grad.shape, shape)) if s == 1 and g != 1]
-    return grad.sum(dim=dims, keepdim=True) if dims else grad
 
 
 class _BilateralTaps(torch.autograd.Function):
@@ -64,8 +59,6 @@ class _BilateralTaps(torch.autograd.Function):
     @staticmethod
     def backward(ctx, grad_total, grad_norm):  # type: ignore[override]
         image, direction, step, spatial, neg_a, neg_r = ctx.saved_tensors
-        _, _, h, w = image.shape
-        pixels_per_grid_unit = image.new_tensor([2.0 / max(w - 1, 1), 2.0 / max(h - 1, 1)]).view(1, 2, 1, 1)
         full = torch.broadcast_shapes(step.shape, neg_a.shape, neg_r.shape)
         g_image = torch.zeros_like(image)
         g_direction = torch.zeros_like(direction)
@@ -91,14 +84,11 @@ class _BilateralTaps(torch.autograd.Function):
                 g_image.sub_(through_range)
                 g_neg_r.add_(g_log_range * range_sq)
                 g_w_pair.add_(g_weight * geo.inside * range_weight)
-                g_sampled_image, g_grid = torch.ops.aten.grid_sampler_2d_backward(
-                    g_value, image, grid, 0, 1, True, [need_image, True]
-                )
-                if need_image:
+                g_sampled_image, g_offset = sample_backward(g_value, image, grid, need_image)
+                if g_sampled_image is not None:
                     g_image.add_(g_sampled_image)
-                g_offset_signed.add_(g_grid.permute(0, 3, 1, 2), alpha=sign)
+                g_offset_signed.add_(g_offset, alpha=sign)
             # chain rule through the sample geometry, shared by both sides
-            g_offset_signed.mul_(pixels_per_grid_unit)
             g_direction.addcmul_(g_offset_signed, geo.distance)
             g_distance = g_offset_signed[:, 0:1] * direction[:, 0:1] + g_offset_signed[:, 1:2] * direction[:, 1:2]
             g_distance_per_pair = g_distance / geo.w_pair
@@ -111,10 +101,10 @@ class _BilateralTaps(torch.autograd.Function):
         return (
             g_image if need_image else None,
             g_direction if ctx.needs_input_grad[1] else None,
-            _sum_to(g_step, step.shape) if ctx.needs_input_grad[2] else None,
+            sum_to(g_step, step.shape) if ctx.needs_input_grad[2] else None,
             None,
-            _sum_to(g_neg_a, neg_a.shape) if ctx.needs_input_grad[4] else None,
-            _sum_to(g_neg_r, neg_r.shape) if ctx.needs_input_grad[5] else None,
+            sum_to(g_neg_a, neg_a.shape) if ctx.needs_input_grad[4] else None,
+            sum_to(g_neg_r, neg_r.shape) if ctx.needs_input_grad[5] else None,
             None,
         )
 

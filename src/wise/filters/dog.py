@@ -9,11 +9,89 @@ import torch
 from wise.filters._checks import ParamLike, as_map, check_image, max_value, resolution_scale
 from wise.filters.flow import check_direction, pixel_step, trace_streamlines
 from wise.filters.gaussian import MIN_SIGMA, SUPPORT, in_support
-from wise.filters.sampling import sample, sample_at_grid, tap_sum
+from wise.filters.sampling import offset_grid, sample, sample_at_grid, sample_backward, sum_to, tap_sum
 from wise.filters.structure import gradient_direction
 
 WIDE_TO_NARROW = 1.6
 """Ratio of the wide to the narrow Gaussian in the DoG (Winnemöller et al. 2012)."""
+
+
+class _DogTaps(torch.autograd.Function):
+    """Sums over the samples across the flow for the narrow and the wide Gaussian.
+
+    Returns ``sum w_n v``, ``sum w_n``, ``sum w_w v`` and ``sum w_w``. Backward recomputes
+    the samples with analytic derivatives; only the inputs are kept.
+    """
+
+    @staticmethod
+    def _weights(i: int, step, wide, neg_inv_two_narrow_sq, neg_inv_two_wide_sq):
+        distance = i * step
+        distance_sq = distance * distance
+        inside = in_support(distance, wide, nearest=i == 1)
+        w_narrow = torch.exp(distance_sq * neg_inv_two_narrow_sq) * inside
+        w_wide = torch.exp(distance_sq * neg_inv_two_wide_sq) * inside
+        return distance, distance_sq, w_narrow, w_wide
+
+    @staticmethod
+    def forward(ctx, image, direction, step, wide, neg_inv_two_narrow_sq, neg_inv_two_wide_sq, steps: int):  # type: ignore[override]
+        sum_narrow, sum_wide = torch.zeros_like(image), torch.zeros_like(image)
+        norm_narrow, norm_wide = torch.zeros_like(step), torch.zeros_like(step)
+        for i in range(1, steps + 1):
+            distance, _, w_narrow, w_wide = _DogTaps._weights(
+                i, step, wide, neg_inv_two_narrow_sq, neg_inv_two_wide_sq
+            )
+            both_sides = sample(image, direction * distance) + sample(image, direction * -distance)
+            sum_narrow.addcmul_(w_narrow, both_sides)
+            sum_wide.addcmul_(w_wide, both_sides)
+            norm_narrow.add_(w_narrow, alpha=2.0)
+            norm_wide.add_(w_wide, alpha=2.0)
+        ctx.save_for_backward(image, direction, step, wide, neg_inv_two_narrow_sq, neg_inv_two_wide_sq)
+        ctx.steps = steps
+        return sum_narrow, norm_narrow, sum_wide, norm_wide
+
+    @staticmethod
+    def backward(ctx, g_sum_narrow, g_norm_narrow, g_sum_wide, g_norm_wide):  # type: ignore[override]
+        image, direction, step, wide, neg_narrow, neg_wide = ctx.saved_tensors
+        need_image = ctx.needs_input_grad[0]
+        full = torch.broadcast_shapes(step.shape, neg_narrow.shape, neg_wide.shape)
+        g_image = torch.zeros_like(image)
+        g_direction = torch.zeros_like(direction)
+        g_step = torch.zeros(full, dtype=step.dtype, device=step.device)
+        g_neg_narrow, g_neg_wide = torch.zeros_like(g_step), torch.zeros_like(g_step)
+        for i in range(1, ctx.steps + 1):
+            distance, distance_sq, w_narrow, w_wide = _DogTaps._weights(i, step, wide, neg_narrow, neg_wide)
+            g_value = g_sum_narrow * w_narrow + g_sum_wide * w_wide
+            g_offset_signed = torch.zeros_like(direction)
+            both_sides = torch.zeros_like(image)
+            for sign in (1.0, -1.0):
+                grid = offset_grid(direction * (sign * distance))
+                both_sides.add_(sample_at_grid(image, grid))
+                g_sampled_image, g_offset = sample_backward(g_value, image, grid, need_image)
+                if g_sampled_image is not None:
+                    g_image.add_(g_sampled_image)
+                g_offset_signed.add_(g_offset, alpha=sign)
+            g_w_narrow = (g_sum_narrow * both_sides).sum(dim=1, keepdim=True) + 2.0 * g_norm_narrow
+            g_w_wide = (g_sum_wide * both_sides).sum(dim=1, keepdim=True) + 2.0 * g_norm_wide
+            g_log_narrow, g_log_wide = g_w_narrow * w_narrow, g_w_wide * w_wide
+            g_neg_narrow.addcmul_(g_log_narrow, distance_sq)
+            g_neg_wide.addcmul_(g_log_wide, distance_sq)
+            g_direction.addcmul_(g_offset_signed, distance)
+            g_distance = (
+                g_offset_signed[:, 0:1] * direction[:, 0:1]
+                + g_offset_signed[:, 1:2] * direction[:, 1:2]
+                + 2.0 * distance * (g_log_narrow * neg_narrow + g_log_wide * neg_wide)
+            )
+            g_step.add_(g_distance, alpha=float(i))
+        wanted = ctx.needs_input_grad
+        return (
+            g_image if need_image else None,
+            g_direction if wanted[1] else None,
+            sum_to(g_step, step.shape) if wanted[2] else None,
+            None,
+            sum_to(g_neg_narrow, neg_narrow.shape) if wanted[4] else None,
+            sum_to(g_neg_wide, neg_wide.shape) if wanted[5] else None,
+            None,
+        )
 
 
 def flow_dog(
@@ -53,18 +131,9 @@ def flow_dog(
     neg_inv_two_narrow_sq = -0.5 / narrow.square()
     neg_inv_two_wide_sq = -0.5 / wide.square()
 
-    def tap(k: int, image, direction, step, wide, neg_inv_two_narrow_sq, neg_inv_two_wide_sq):
-        sign = 1.0 if k % 2 == 0 else -1.0
-        distance = (k // 2 + 1) * step
-        value = sample(image, direction * (sign * distance))
-        distance_sq = distance * distance
-        inside = in_support(distance, wide, nearest=k < 2)
-        w_narrow = torch.exp(distance_sq * neg_inv_two_narrow_sq) * inside
-        w_wide = torch.exp(distance_sq * neg_inv_two_wide_sq) * inside
-        return w_narrow * value, w_narrow, w_wide * value, w_wide
-
-    sum_narrow, norm_narrow, sum_wide, norm_wide = tap_sum(
-        tap, 2 * steps, image, direction, step, wide, neg_inv_two_narrow_sq, neg_inv_two_wide_sq
+    direction = direction.expand(image.shape[0], -1, -1, -1)
+    sum_narrow, norm_narrow, sum_wide, norm_wide = _DogTaps.apply(
+        image, direction, step, wide, neg_inv_two_narrow_sq, neg_inv_two_wide_sq, steps
     )
     blur_narrow = (image + sum_narrow) / (1.0 + norm_narrow)
     blur_wide = (image + sum_wide) / (1.0 + norm_wide)

@@ -102,3 +102,25 @@ def tap_sum(tap_fn: TapFn, n_taps: int, *inputs: torch.Tensor) -> tuple[torch.Te
         assert sums is not None
         return tuple(sums)
     return _TapSum.apply(tap_fn, n_taps, *inputs)
+
+
+def sample_backward(
+    grad_value: torch.Tensor, image: torch.Tensor, grid: torch.Tensor, need_image: bool
+) -> tuple[torch.Tensor | None, torch.Tensor]:
+    """Gradients of :func:`sample_at_grid` for the custom backward passes of the filters.
+
+    Returns the gradient for ``image`` (``None`` unless ``need_image``) and the gradient for
+    the sampling offset in pixels, ``(B, 2, H, W)``.
+    """
+    _, _, h, w = image.shape
+    g_image, g_grid = torch.ops.aten.grid_sampler_2d_backward(
+        grad_value, image, grid, 0, 1, True, [need_image, True]
+    )
+    pixels_per_grid_unit = grad_value.new_tensor([2.0 / max(w - 1, 1), 2.0 / max(h - 1, 1)]).view(1, 2, 1, 1)
+    return (g_image if need_image else None), g_grid.permute(0, 3, 1, 2) * pixels_per_grid_unit
+
+
+def sum_to(grad: torch.Tensor, shape: torch.Size) -> torch.Tensor:
+    """Sum a gradient over the dimensions that were broadcast from ``shape``."""
+    dims = [i for i, (g, s) in enumerate(zip(grad.shape, shape)) if s == 1 and g != 1]
+    return grad.sum(dim=dims, keepdim=True) if dims else grad
