@@ -90,3 +90,11 @@ class Effect(nn.Module):
         if self.checkpoint and torch.is_grad_enabled():
             return _checkpoint(fn, *args, use_reentrant=False, **kwargs)
         return fn(*args, **kwargs)
+
+    @staticmethod
+    def recomputed(fn: Callable[..., torch.Tensor], *args: object, **kwargs: object) -> torch.Tensor:
+        """Run a cheap pointwise stage and recompute it during backward rather than keeping
+        its many intermediate tensors."""
+        if torch.is_grad_enabled():
+            return _checkpoint(fn, *args, use_reentrant=False, **kwargs)
+        return fn(*args, **kwargs)

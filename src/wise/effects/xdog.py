@@ -90,10 +90,10 @@ class XDoG(Effect):
         sigmas = detail_sigmas(p["details"])
         samples = self.kernel_size
 
-        adjusted = self.stage(
+        adjusted = self.recomputed(
             adjust_color, image, brightness=p["brightness"], contrast=p["contrast"], saturation=p["saturation"]
         )
-        lab = self.stage(rgb_to_lab, adjusted)
+        lab = self.recomputed(rgb_to_lab, adjusted)
         structure = self.stage(
             smoothed_structure_tensor, lab[:, :1], sigmas["structure"], STRUCTURE_SMOOTHING, scale
         )

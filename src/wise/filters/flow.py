@@ -21,7 +21,26 @@ def pixel_step(direction: torch.Tensor) -> torch.Tensor:
     axis the direction is closer to, so every sample lands on a pixel row or column.
     Returns ``(B, 1, H, W)`` values in [1, sqrt(2)].
     """
-    return 1.0 / torch.maximum(direction[:, 0:1].abs(), direction[:, 1:2].abs()).clamp_min(1e-6)
+    return _PixelStep.apply(direction)
+
+
+class _PixelStep(torch.autograd.Function):
+    """``1 / max(|x|, |y|)`` keeping only its input for backward."""
+
+    @staticmethod
+    def forward(ctx, direction: torch.Tensor) -> torch.Tensor:  # type: ignore[override]
+        ctx.save_for_backward(direction)
+        return 1.0 / torch.maximum(direction[:, 0:1].abs(), direction[:, 1:2].abs()).clamp_min(1e-6)
+
+    @staticmethod
+    def backward(ctx, grad: torch.Tensor) -> torch.Tensor:  # type: ignore[override]
+        (direction,) = ctx.saved_tensors
+        x, y = direction[:, 0:1], direction[:, 1:2]
+        x_major = x.abs() >= y.abs()
+        major = torch.where(x_major, x, y)
+        g_major = -grad / major.abs().clamp_min(1e-6).square() * torch.sign(major)
+        zero = torch.zeros_like(g_major)
+        return torch.cat((torch.where(x_major, g_major, zero), torch.where(x_major, zero, g_major)), dim=1)
 
 
 @torch.no_grad()
