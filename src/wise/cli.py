@@ -15,13 +15,16 @@ import sys
 from pathlib import Path
 from typing import NoReturn, Sequence, TextIO
 
+import numpy as np
 import torch
 
 from wise import __version__, effects
 from wise.effects.base import Effect
 from wise.errors import WiseError
-from wise.io import WRITE_FORMATS, read_image, write_image
+from wise.gallery import make_sheet
+from wise.io import WRITE_FORMATS, image_to_tensor, read_image, write_image
 from wise.paramfile import load_params
+from wise.render import render
 
 PROG = "wise"
 EXIT_USAGE = 2
@@ -71,6 +74,14 @@ def build_parser() -> argparse.ArgumentParser:
     apply.add_argument("--kernel-size", type=int, metavar="D", help="filter samples per side (quality/speed)")
     apply.add_argument("--quality", type=int, default=95, metavar="Q", help="JPEG quality 1-100 (default 95)")
     apply.set_defaults(func=_cmd_apply)
+
+    gallery = commands.add_parser("gallery", help="every effect and preset on one labelled contact sheet")
+    gallery.add_argument("input", metavar="INPUT", help="input image (PNG, JPEG, WebP or TIFF)")
+    gallery.add_argument("-o", "--output", required=True, metavar="SHEET", help="output sheet (.png or .jpg)")
+    gallery.add_argument("--size", type=int, default=512, metavar="PX", help="short side of each cell (default 512)")
+    gallery.add_argument("--effects", nargs="+", metavar="EFFECT", help="only these effects")
+    gallery.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto", help="default: cuda if available")
+    gallery.set_defaults(func=_cmd_gallery)
     return parser
 
 
@@ -173,10 +184,28 @@ def _cmd_apply(args: argparse.Namespace, out: TextIO) -> int:
     _check_output(output)
     device = _device(args.device)
     image = read_image(args.input)
-    effect = effect.to(device).eval()
-    with torch.no_grad():
-        result = effect(image.to(device), params.to(device))
-    write_image(result.cpu(), output, quality=args.quality)
+    result = render(effect.to(device).eval(), image, params, device=device)
+    write_image(result, output, quality=args.quality)
+    return 0
+
+
+def _cmd_gallery(args: argparse.Namespace, out: TextIO) -> int:
+    if args.size < 16:
+        raise WiseError(f"--size must be at least 16 pixels, got {args.size}")
+    names = args.effects or effects.available()
+    for name in names:
+        effects.create(name)  # unknown names fail before any work
+    output = Path(args.output)
+    _check_output(output)
+    device = _device(args.device)
+    image = read_image(args.input)
+
+    def report(effect: str, preset: str, seconds: float) -> None:
+        print(f"{effect:10s} {preset:12s} {seconds:6.2f} s", file=out, flush=True)
+
+    sheet = make_sheet(image, args.size, names, device, progress=report)
+    write_image(image_to_tensor(np.asarray(sheet)), output)
+    print(f"wrote {output}", file=out)
     return 0
 
 

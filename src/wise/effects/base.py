@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Callable, ClassVar, Mapping
 
 import torch
@@ -10,7 +11,22 @@ from torch.utils.checkpoint import checkpoint as _checkpoint
 
 from wise import params as P
 from wise.errors import WiseError
+from wise.filters._checks import REFERENCE_SHORT_SIDE
 from wise.params import ParamSpec
+
+
+@dataclass(frozen=True)
+class RenderContext:
+    """Where the image being rendered sits in the whole picture.
+
+    ``scale`` is pixels per reference pixel of the whole picture (its short side / 512), so
+    that a tile is filtered exactly like the same region of the whole image; ``origin`` is the
+    (y, x) pixel of the tile's top-left corner in the whole picture, for position-dependent
+    textures.
+    """
+
+    scale: float
+    origin: tuple[int, int] = (0, 0)
 
 
 class Effect(nn.Module):
@@ -69,8 +85,19 @@ class Effect(nn.Module):
     def params_to_dict(self, params: torch.Tensor) -> dict[str, float]:
         return P.to_dict(self.param_specs, params)
 
-    def forward(self, image: torch.Tensor, params: torch.Tensor) -> torch.Tensor:
-        """Stylize ``image`` (B, 3, H, W) in [0, 1] with normalized ``params`` (B, P) or (B, P, h, w)."""
+    def forward(
+        self,
+        image: torch.Tensor,
+        params: torch.Tensor,
+        *,
+        scale: float | None = None,
+        origin: tuple[int, int] = (0, 0),
+    ) -> torch.Tensor:
+        """Stylize ``image`` (B, 3, H, W) in [0, 1] with normalized ``params`` (B, P) or (B, P, h, w).
+
+        ``scale`` and ``origin`` describe the whole picture when ``image`` is one tile of it
+        (see :class:`RenderContext`); by default the image is the whole picture.
+        """
         if not isinstance(image, torch.Tensor) or image.dim() != 4 or image.shape[1] != 3:
             shape = tuple(image.shape) if isinstance(image, torch.Tensor) else type(image).__name__
             raise WiseError(f"image must be a (B, 3, H, W) tensor, got {shape}")
@@ -80,9 +107,16 @@ class Effect(nn.Module):
             raise WiseError(f"image is too small ({image.shape[-2]}x{image.shape[-1]}); both sides must be at least 8 pixels")
         params = P.check_params(params, self.param_specs, image.shape[0]).to(image)
         values = P.real_maps(params, self.param_specs, tuple(image.shape[-2:]))
-        return self.render(image, values)
+        if scale is None:
+            scale = min(image.shape[-2:]) / REFERENCE_SHORT_SIDE
+        return self.render(image, values, RenderContext(scale, origin))
 
-    def render(self, image: torch.Tensor, p: Mapping[str, torch.Tensor]) -> torch.Tensor:
+    def render(self, image: torch.Tensor, p: Mapping[str, torch.Tensor], ctx: RenderContext) -> torch.Tensor:
+        """The pipeline, on parameters in real units (see the class docstring)."""
+        raise NotImplementedError
+
+    def halo(self, scale: float) -> int:
+        """How many pixels around a tile the pipeline reads at ``scale`` (an upper bound)."""
         raise NotImplementedError
 
     def stage(self, fn: Callable[..., torch.Tensor], *args: object, **kwargs: object) -> torch.Tensor:

@@ -2,48 +2,19 @@
 
 from __future__ import annotations
 
+import math
 from typing import Mapping
 
 import torch
 
-from wise.effects.base import Effect
-from wise.filters import (
-    adjust_color,
-    edge_tangent_flow,
-    flow_dog,
-    flow_smoothing,
-    oriented_bilateral,
-    resolution_scale,
-    rgb_to_lab,
-    smoothed_structure_tensor,
-    xdog_threshold,
-)
+from wise.effects.base import Effect, RenderContext
+from wise.effects.common import LUMINANCE_RANGE, STRUCTURE_SMOOTHING, detail_sigmas, edge_flow, xdog_lines
+from wise.filters import adjust_color, oriented_bilateral, rgb_to_lab
+from wise.filters.gaussian import SUPPORT
 from wise.params import ParamSpec
 
-STRUCTURE_SMOOTHING = 1.5
-"""Sigma of the Gaussian that smooths the structure tensor (reference pixels)."""
-CONTOUR_GAIN = 100.0
-"""DoG sharpening p per unit of ``contour``."""
-EDGE_SHARPNESS = 1000.0
-"""phi of the soft threshold, in units of normalized luminance."""
-LUMINANCE_RANGE = 100.0
-"""CIE L* of white; luminance is normalized to [0, 1] before the DoG."""
-
-
-def detail_sigmas(details: torch.Tensor) -> dict[str, torch.Tensor]:
-    """The internal sigmas controlled by ``details`` (in [0, 3]; more detail, less smoothing).
-
-    Follows the mapping of the public WISE reference implementation: the structure
-    tensor's derivative scale, the bilateral filter's spatial and range sigmas, and the
-    line-integral smoothing of the edges all shrink linearly as detail grows.
-    """
-    coarseness = 3.0 - details
-    return {
-        "structure": 0.75 * (1.0 - details / 3.0) + 0.25,
-        "bilateral_spatial": 2.5 * coarseness,
-        "bilateral_range": (15.0 / 7.0) * coarseness,
-        "edge_smoothing": 1.2 * coarseness + 1.42,
-    }
+DIAGONAL_STEP = math.sqrt(2.0)
+"""Longest distance of one pixel step along a direction field."""
 
 
 class XDoG(Effect):
@@ -85,8 +56,15 @@ class XDoG(Effect):
         },
     }
 
-    def render(self, image: torch.Tensor, p: Mapping[str, torch.Tensor]) -> torch.Tensor:
-        scale = resolution_scale(image)
+    def halo(self, scale: float) -> int:
+        most = detail_sigmas(torch.tensor(0.0))
+        structure_reach = float(most["structure"]) + SUPPORT * STRUCTURE_SMOOTHING
+        flow_reach = (structure_reach + SUPPORT * float(most["edge_smoothing"])) * scale
+        sample_reach = DIAGONAL_STEP * (2 * 2 * self.kernel_size + 2 * (self.kernel_size + 2))
+        return math.ceil(flow_reach + sample_reach) + 2
+
+    def render(self, image: torch.Tensor, p: Mapping[str, torch.Tensor], ctx: RenderContext) -> torch.Tensor:
+        scale = ctx.scale
         sigmas = detail_sigmas(p["details"])
         samples = self.kernel_size
 
@@ -94,23 +72,19 @@ class XDoG(Effect):
             adjust_color, image, brightness=p["brightness"], contrast=p["contrast"], saturation=p["saturation"]
         )
         lab = self.recomputed(rgb_to_lab, adjusted)
-        structure = self.stage(
-            smoothed_structure_tensor, lab[:, :1], sigmas["structure"], STRUCTURE_SMOOTHING, scale
-        )
-        tangent = self.stage(edge_tangent_flow, structure)
+        tangent = self.stage(edge_flow, lab[:, :1], sigmas["structure"], scale)
         abstracted = self.stage(
-            oriented_bilateral,
-            lab,
+            oriented_bilateral, lab, tangent, sigmas["bilateral_spatial"], sigmas["bilateral_range"], samples, scale
+        )
+        lines = self.stage(
+            xdog_lines,
+            abstracted[:, :1] / LUMINANCE_RANGE,
             tangent,
-            sigmas["bilateral_spatial"],
-            sigmas["bilateral_range"],
+            p["stroke_width"],
+            p["contour"],
+            p["blackness"],
+            sigmas["edge_smoothing"],
             samples,
             scale,
         )
-        luminance = abstracted[:, :1] / LUMINANCE_RANGE
-        edges = self.stage(
-            flow_dog, luminance, tangent, p["stroke_width"], CONTOUR_GAIN * p["contour"], 2 * (samples + 2), scale
-        )
-        smoothed_edges = self.stage(flow_smoothing, edges, tangent, sigmas["edge_smoothing"], scale=scale)
-        lines = xdog_threshold(smoothed_edges, p["blackness"], EDGE_SHARPNESS)
         return lines.expand(-1, 3, -1, -1)

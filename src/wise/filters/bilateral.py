@@ -168,3 +168,23 @@ def oriented_bilateral(
     """
     across = bilateral_pass(image, gradient_direction(tangent), sigma_d, sigma_r, samples, scale)
     return bilateral_pass(across, tangent, sigma_d, sigma_r, samples, scale)
+
+
+def bilateral(
+    image: torch.Tensor,
+    sigma_d: ParamLike,
+    sigma_r: ParamLike,
+    samples: int = 3,
+    scale: float | None = None,
+) -> torch.Tensor:
+    """Bilateral filter (Tomasi & Manduchi 1998) over a fixed, axis-aligned neighbourhood,
+    separated into a horizontal and a vertical pass (Pham & van Vliet 2005).
+
+    See :func:`bilateral_pass` for the arguments.
+    """
+    check_image(image)
+    b, _, h, w = image.shape
+    horizontal = image.new_tensor([1.0, 0.0]).view(1, 2, 1, 1).expand(b, 2, h, w)
+    vertical = image.new_tensor([0.0, 1.0]).view(1, 2, 1, 1).expand(b, 2, h, w)
+    rows = bilateral_pass(image, horizontal, sigma_d, sigma_r, samples, scale)
+    return bilateral_pass(rows, vertical, sigma_d, sigma_r, samples, scale)

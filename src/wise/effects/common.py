@@ -1,0 +1,64 @@
+"""Sub-pipelines shared by several effects: the edge flow and XDoG lines."""
+
+from __future__ import annotations
+
+import torch
+
+from wise.filters import (
+    edge_tangent_flow,
+    flow_dog,
+    flow_smoothing,
+    smoothed_structure_tensor,
+    xdog_threshold,
+)
+
+STRUCTURE_SMOOTHING = 1.5
+"""Sigma of the Gaussian that smooths the structure tensor (reference pixels)."""
+CONTOUR_GAIN = 100.0
+"""DoG sharpening p per unit of ``contour``."""
+EDGE_SHARPNESS = 1000.0
+"""phi of the XDoG soft threshold, in units of normalized luminance."""
+LUMINANCE_RANGE = 100.0
+"""CIE L* of white; luminance is normalized to [0, 1] before the DoG."""
+
+
+def detail_sigmas(details: torch.Tensor) -> dict[str, torch.Tensor]:
+    """The internal sigmas controlled by ``details`` (in [0, 3]; more detail, less smoothing).
+
+    Follows the mapping of the public WISE reference implementation: the structure
+    tensor's derivative scale, the bilateral filter's spatial and range sigmas, and the
+    line-integral smoothing of the edges all shrink linearly as detail grows.
+    """
+    coarseness = 3.0 - details
+    return {
+        "structure": 0.75 * (1.0 - details / 3.0) + 0.25,
+        "bilateral_spatial": 2.5 * coarseness,
+        "bilateral_range": (15.0 / 7.0) * coarseness,
+        "edge_smoothing": 1.2 * coarseness + 1.42,
+    }
+
+
+def edge_flow(luminance: torch.Tensor, derivative_sigma: torch.Tensor | float, scale: float) -> torch.Tensor:
+    """Edge tangent flow ``(B, 2, H, W)`` of a luminance image ``(B, 1, H, W)`` (any units)."""
+    structure = smoothed_structure_tensor(luminance, derivative_sigma, STRUCTURE_SMOOTHING, scale)
+    return edge_tangent_flow(structure)
+
+
+def xdog_lines(
+    luminance: torch.Tensor,
+    tangent: torch.Tensor,
+    stroke_width: torch.Tensor,
+    contour: torch.Tensor,
+    blackness: torch.Tensor,
+    edge_smoothing: torch.Tensor,
+    kernel_size: int,
+    scale: float,
+) -> torch.Tensor:
+    """Flow-based XDoG (Winnemöller et al. 2012): black lines on white, ``(B, 1, H, W)``.
+
+    ``luminance`` is normalized to [0, 1]; DoG across the flow, line-integral smoothing along
+    it, soft threshold at ``blackness``.
+    """
+    edges = flow_dog(luminance, tangent, stroke_width, CONTOUR_GAIN * contour, 2 * (kernel_size + 2), scale)
+    smoothed = flow_smoothing(edges, tangent, edge_smoothing, scale=scale)
+    return xdog_threshold(smoothed, blackness, EDGE_SHARPNESS)

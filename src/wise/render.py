@@ -1,0 +1,90 @@
+"""Rendering large images without autograd, tile by tile.
+
+A tile is rendered with a halo of the pixels its pipeline reads around it, with the scale and
+position of the whole picture, and only its core is kept, so the tiles join without seams.
+Parameter masks are resampled for each tile from the mask itself, exactly as
+:func:`wise.params.resize_masks` would resample them for the whole picture, without ever
+building full-resolution masks.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Iterator
+
+import torch
+import torch.nn.functional as F
+
+from wise.effects.base import Effect
+from wise.filters._checks import REFERENCE_SHORT_SIDE
+from wise.params import check_params
+
+DEFAULT_TILE = 1024
+"""Core size of a tile in pixels."""
+
+
+@dataclass(frozen=True)
+class Tile:
+    """A tile's core ``[y0, y1) x [x0, x1)`` and the padded box ``[py0, py1) x [px0, px1)`` read for it."""
+
+    y0: int
+    y1: int
+    x0: int
+    x1: int
+    py0: int
+    py1: int
+    px0: int
+    px1: int
+
+
+def tiles(height: int, width: int, tile: int, halo: int) -> Iterator[Tile]:
+    """Cover ``height x width`` with cores of at most ``tile`` pixels, padded by ``halo``."""
+    for y0 in range(0, height, tile):
+        for x0 in range(0, width, tile):
+            y1, x1 = min(y0 + tile, height), min(x0 + tile, width)
+            yield Tile(y0, y1, x0, x1, max(0, y0 - halo), min(height, y1 + halo), max(0, x0 - halo), min(width, x1 + halo))
+
+
+def masks_for_box(masks: torch.Tensor, size: tuple[int, int], box: tuple[int, int, int, int]) -> torch.Tensor:
+    """``resize_masks(masks, size)[..., y0:y1, x0:x1]`` without the full-size intermediate.
+
+    Args:
+        masks: ``(B, P, h, w)``.
+        size: (H, W) of the whole picture.
+        box: (y0, y1, x0, x1) in the whole picture.
+    """
+    height, width = size
+    y0, y1, x0, x1 = box
+    ys = (torch.arange(y0, y1, dtype=masks.dtype, device=masks.device) + 0.5) * (2.0 / height) - 1.0
+    xs = (torch.arange(x0, x1, dtype=masks.dtype, device=masks.device) + 0.5) * (2.0 / width) - 1.0
+    grid = torch.stack(torch.meshgrid(xs, ys, indexing="xy"), dim=-1).unsqueeze(0).expand(masks.shape[0], -1, -1, -1)
+    return F.grid_sample(masks, grid, mode="bilinear", padding_mode="border", align_corners=False)
+
+
+@torch.no_grad()
+def render(
+    effect: Effect,
+    image: torch.Tensor,
+    params: torch.Tensor,
+    tile: int = DEFAULT_TILE,
+    device: torch.device | str | None = None,
+) -> torch.Tensor:
+    """Render ``effect`` on ``image`` (B, 3, H, W) without autograd, in tiles when it is large.
+
+    Memory stays that of one padded tile; the result, on ``image``'s device, equals rendering
+    the whole picture at once up to floating-point rounding.
+    """
+    device = torch.device(device) if device is not None else image.device
+    batch, _, height, width = image.shape
+    params = check_params(params, effect.param_specs, batch)
+    scale = min(height, width) / REFERENCE_SHORT_SIDE
+    if max(height, width) <= tile:
+        return effect(image.to(device), params.to(device), scale=scale).to(image.device)
+    halo = effect.halo(scale)
+    out = torch.empty_like(image)
+    for t in tiles(height, width, tile, halo):
+        crop = image[..., t.py0 : t.py1, t.px0 : t.px1].to(device)
+        crop_params = params if params.dim() == 2 else masks_for_box(params, (height, width), (t.py0, t.py1, t.px0, t.px1))
+        result = effect(crop, crop_params.to(device), scale=scale, origin=(t.py0, t.px0))
+        out[..., t.y0 : t.y1, t.x0 : t.x1] = result[..., t.y0 - t.py0 : t.y1 - t.py0, t.x0 - t.px0 : t.x1 - t.px0].to(out.device)
+    return out
