@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 from wise.effects.base import Effect
+from wise.effects.cartoon import Cartoon
+from wise.effects.oilpaint import OilPaint
+from wise.effects.watercolor import Watercolor
 from wise.effects.xdog import XDoG
 from wise.errors import WiseError
 
-_REGISTRY: dict[str, type[Effect]] = {cls.name: cls for cls in (XDoG,)}
+_REGISTRY: dict[str, type[Effect]] = {cls.name: cls for cls in (Cartoon, OilPaint, Watercolor, XDoG)}
 
 
 def available() -> list[str]:
@@ -23,4 +26,4 @@ def create(name: str, **options: object) -> Effect:
     return cls(**options)
 
 
-__all__ = ["Effect", "available", "create", "XDoG"]
+__all__ = ["Cartoon", "Effect", "OilPaint", "Watercolor", "XDoG", "available", "create"]

@@ -7,9 +7,9 @@ from typing import Callable, ClassVar, Mapping
 
 import torch
 from torch import nn
-from torch.utils.checkpoint import checkpoint as _checkpoint
 
 from wise import params as P
+from wise.effects.recompute import recompute
 from wise.errors import WiseError
 from wise.filters._checks import REFERENCE_SHORT_SIDE
 from wise.params import ParamSpec
@@ -121,14 +121,12 @@ class Effect(nn.Module):
 
     def stage(self, fn: Callable[..., torch.Tensor], *args: object, **kwargs: object) -> torch.Tensor:
         """Run one pipeline stage, checkpointed when ``self.checkpoint`` is set."""
-        if self.checkpoint and torch.is_grad_enabled():
-            return _checkpoint(fn, *args, use_reentrant=False, **kwargs)
+        if self.checkpoint:
+            return recompute(fn, *args, **kwargs)
         return fn(*args, **kwargs)
 
     @staticmethod
     def recomputed(fn: Callable[..., torch.Tensor], *args: object, **kwargs: object) -> torch.Tensor:
         """Run a cheap pointwise stage and recompute it during backward rather than keeping
         its many intermediate tensors."""
-        if torch.is_grad_enabled():
-            return _checkpoint(fn, *args, use_reentrant=False, **kwargs)
-        return fn(*args, **kwargs)
+        return recompute(fn, *args, **kwargs)

@@ -1,0 +1,169 @@
+"""Watercolor: abstracted washes with wet-in-wet, wobbling, edge darkening and paper
+(Bousseau et al. 2006; Wang et al. 2014), as in WISE."""
+
+from __future__ import annotations
+
+import math
+from typing import Mapping
+
+import torch
+
+from wise.effects.base import Effect, RenderContext
+from wise.effects.common import LUMINANCE_RANGE, detail_sigmas, xdog_lines
+from wise.filters import (
+    adjust_color,
+    edge_tangent_flow,
+    gradient_direction,
+    rgb_to_lab,
+    smoothed_structure_tensor,
+)
+from wise.filters.composite import blend
+from wise.filters.gaussian import SUPPORT
+from wise.filters.kuwahara import anisotropic_kuwahara
+from wise.filters.noise import paper_texture, value_noise
+from wise.filters.watercolor import edge_darkening, gaps_overlaps, pigment_density, wet_in_wet, wobble
+from wise.params import ParamSpec
+
+FLOW_DERIVATIVE = 1.0
+"""Derivative scale of the structure tensor (reference pixels)."""
+FLOW_SMOOTHING = 2.0
+"""Smoothing of the structure tensor (reference pixels)."""
+EDGE_CONTRAST = 12.0
+"""Luminance change per reference pixel (CIE L*) at which an edge counts as fully strong."""
+TURBULENCE_CELL = 40.0
+"""Cell size of the low-frequency pigment turbulence (reference pixels)."""
+DISPERSION_CELL = 2.5
+"""Cell size of the high-frequency pigment dispersion (reference pixels)."""
+TURBULENCE_GAIN = 0.6
+DISPERSION_GAIN = 0.35
+GRANULATION_GAIN = 0.5
+"""Pigment-density change at full turbulence, dispersion and granulation."""
+CONTOUR_DETAILS = 2.0
+"""Detail level of the pencil contours (as ``details`` of the XDoG effect)."""
+CONTOUR_STROKE = 0.5
+CONTOUR_STRENGTH = 1.0
+CONTOUR_THRESHOLD = 0.25
+WOBBLE_GAIN = 8.0
+"""The paper's slope is about 1/8 per reference pixel: one unit of ``wobble`` then shifts the
+washes by about one reference pixel."""
+KUWAHARA_MAX_STRETCH = 2.0
+"""Longest semi-axis of the anisotropic Kuwahara ellipse per unit of radius."""
+
+
+def edge_strength(structure: torch.Tensor, scale: float) -> torch.Tensor:
+    """Edges in [0, 1] from a luminance structure tensor: the gradient magnitude per reference pixel."""
+    magnitude = torch.sqrt(structure[:, 0:1] + structure[:, 2:3] + 1e-12) * scale
+    return torch.tanh(magnitude / EDGE_CONTRAST)
+
+
+class Watercolor(Effect):
+    """Watercolor: flat washes whose pigment pools at the edges, bleeds, wobbles and settles
+    into the paper.
+
+    Pipeline: colour adjustment -> structure tensor and flow -> anisotropic Kuwahara
+    abstraction -> wet-in-wet bleeding across edges -> wobbling by the paper texture -> edge
+    darkening -> pigment turbulence, dispersion and paper granulation (pigment density) ->
+    gaps and overlaps at edges -> pencil contours (flow-based XDoG) multiplied on top.
+    """
+
+    name = "watercolor"
+    param_specs = (
+        ParamSpec("brightness", -0.2, 0.3, 0.05, "added to the input colours"),
+        ParamSpec("contrast", 0.5, 2.0, 1.0, "contrast of the input around mid-grey"),
+        ParamSpec("saturation", 0.0, 2.0, 1.15, "colour saturation"),
+        ParamSpec("abstraction", 1.0, 8.0, 4.0, "radius of the Kuwahara washes"),
+        ParamSpec("bleeding", 0.0, 8.0, 3.0, "how far colours bleed across wet edges"),
+        ParamSpec("wobble", 0.0, 3.0, 1.0, "displacement of the washes by the paper (reference pixels)"),
+        ParamSpec("edge_darkening", 0.0, 3.0, 1.0, "pigment pooling at the edges of washes"),
+        ParamSpec("turbulence", 0.0, 1.0, 0.3, "uneven, cloudy pigment density"),
+        ParamSpec("dispersion", 0.0, 1.0, 0.2, "fine speckles of pigment"),
+        ParamSpec("granulation", 0.0, 1.0, 0.4, "pigment settling in the paper grain"),
+        ParamSpec("gaps_overlaps", -1.0, 1.0, 0.2, "paper gaps (negative) or overlaps (positive) at edges"),
+        ParamSpec("contour", 0.0, 1.0, 0.25, "opacity of the pencil contours"),
+    )
+    presets = {
+        "wet": {
+            "brightness": 0.08,
+            "contrast": 0.95,
+            "saturation": 1.25,
+            "abstraction": 7.0,
+            "bleeding": 6.0,
+            "wobble": 1.5,
+            "edge_darkening": 1.6,
+            "turbulence": 0.5,
+            "dispersion": 0.1,
+            "granulation": 0.35,
+            "gaps_overlaps": 0.5,
+            "contour": 0.0,
+        },
+        "dry": {
+            "brightness": 0.1,
+            "contrast": 1.1,
+            "saturation": 1.05,
+            "abstraction": 4.0,
+            "bleeding": 1.0,
+            "wobble": 0.8,
+            "edge_darkening": 2.6,
+            "turbulence": 0.25,
+            "dispersion": 0.25,
+            "granulation": 0.65,
+            "gaps_overlaps": -0.7,
+            "contour": 0.3,
+        },
+    }
+
+    def __init__(self, kernel_size: int = 3, checkpoint: bool = False, seed: int = 0) -> None:
+        super().__init__(kernel_size, checkpoint)
+        self.seed = seed
+
+    def halo(self, scale: float) -> int:
+        flow_reach = FLOW_DERIVATIVE + SUPPORT * FLOW_SMOOTHING
+        abstraction_reach = KUWAHARA_MAX_STRETCH * self.spec("abstraction").max
+        bleeding_reach = 1.5 * self.spec("bleeding").max
+        texture_reach = WOBBLE_GAIN * self.spec("wobble").max / 4.0 + 4.0
+        contour_reach = SUPPORT * float(detail_sigmas(torch.tensor(CONTOUR_DETAILS))["edge_smoothing"])
+        reach = flow_reach + max(abstraction_reach + bleeding_reach + texture_reach, contour_reach)
+        return math.ceil(reach * scale + math.sqrt(2.0) * 2 * (self.kernel_size + 2)) + 4
+
+    def render(self, image: torch.Tensor, p: Mapping[str, torch.Tensor], ctx: RenderContext) -> torch.Tensor:
+        scale, origin, seed = ctx.scale, ctx.origin, self.seed
+
+        adjusted = self.recomputed(
+            adjust_color, image, brightness=p["brightness"], contrast=p["contrast"], saturation=p["saturation"]
+        )
+        luminance = self.recomputed(rgb_to_lab, adjusted)[:, :1]
+        structure = self.stage(smoothed_structure_tensor, luminance, FLOW_DERIVATIVE, FLOW_SMOOTHING, scale)
+        tangent = edge_tangent_flow(structure)
+        across = gradient_direction(tangent)
+        edges = edge_strength(structure, scale)
+
+        paper = paper_texture(luminance, seed, origin=origin, scale=scale)
+        turbulence_noise = value_noise(luminance, TURBULENCE_CELL, seed + 1, octaves=3, origin=origin, scale=scale)
+        dispersion_noise = value_noise(luminance, DISPERSION_CELL, seed + 2, octaves=2, origin=origin, scale=scale)
+
+        washes = self.stage(anisotropic_kuwahara, adjusted, structure, p["abstraction"], scale=scale)
+        bled = self.stage(wet_in_wet, washes, across, edges, p["bleeding"], turbulence_noise, scale)
+        wobbled = self.stage(wobble, bled, paper, WOBBLE_GAIN * p["wobble"], scale)
+        darkened = self.stage(edge_darkening, wobbled, p["edge_darkening"], scale=scale)
+        density = (
+            1.0
+            + TURBULENCE_GAIN * p["turbulence"] * (2.0 * turbulence_noise - 1.0)
+            + DISPERSION_GAIN * p["dispersion"] * (2.0 * dispersion_noise - 1.0)
+            + GRANULATION_GAIN * p["granulation"] * (2.0 * paper - 1.0)
+        )
+        pigmented = self.recomputed(pigment_density, darkened, density)
+        finished = self.stage(gaps_overlaps, pigmented, edges, across, p["gaps_overlaps"], dispersion_noise, scale)
+
+        contour_sigmas = detail_sigmas(torch.tensor(CONTOUR_DETAILS))
+        pencil = self.stage(
+            xdog_lines,
+            luminance / LUMINANCE_RANGE,
+            tangent,
+            CONTOUR_STROKE,
+            CONTOUR_STRENGTH,
+            CONTOUR_THRESHOLD,
+            float(contour_sigmas["edge_smoothing"]),
+            self.kernel_size,
+            scale,
+        )
+        return blend(finished, pencil.expand_as(finished), "multiply", p["contour"]).clamp(0.0, 1.0)

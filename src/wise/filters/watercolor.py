@@ -1,0 +1,244 @@
+"""Watercolor-specific filters: wobbling, edge darkening, pigment density, gaps & overlaps, wet-in-wet.
+
+Colours are expected in [0, 1] (RGB, 1 = white paper). Every filter is differentiable
+with respect to the image and to its tensor parameters (including the texture, edge,
+noise and direction maps).
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+import torch.nn.functional as F
+
+from wise.errors import WiseError
+from wise.filters._checks import ParamLike, as_map, check_image, resolution_scale
+from wise.filters.flow import check_direction
+from wise.filters.gaussian import SUPPORT, gaussian_blur
+from wise.filters.sampling import sample, tap_sum
+
+PAPER_WHITE = 1.0
+"""The colour the paper shows through gaps."""
+OVERLAP_WIDTH = 2.0
+"""How far across the edge (reference pixels) gaps_overlaps looks for the other wash."""
+EDGE_SIGMA = 1.0
+"""Default smoothing (reference pixels) before measuring the gradient for edge darkening."""
+WET_SAMPLES = 6
+"""Default number of samples on each side of a pixel for the wet-in-wet bleeding."""
+NOISE_FEATHERING = 0.5
+"""How much the noise changes the reach of the wet-in-wet bleeding: by up to this fraction either way."""
+_SELECTION_EPS = 1e-6
+"""Keeps the soft choice between the two sides of an edge finite where both sides agree."""
+_MAGNITUDE_EPS = 1e-4
+"""Smooths the gradient magnitude at zero, where its square root has no derivative."""
+
+
+def _check_map(value: torch.Tensor, image: torch.Tensor, name: str) -> None:
+    """``value`` must be a ``(B, 1, H, W)`` tensor (a batch of 1 broadcasts) matching ``image``."""
+    check_image(value, name=name, channels=1)
+    if value.shape[0] not in (1, image.shape[0]) or value.shape[-2:] != image.shape[-2:]:
+        raise WiseError(f"{name} {tuple(value.shape)} does not match the image {tuple(image.shape)}")
+
+
+def _scale(image: torch.Tensor, scale: float | None) -> float:
+    return resolution_scale(image) if scale is None else scale
+
+
+def _central_differences(x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """d/dx and d/dy of ``x`` (B, C, H, W) per pixel, by central differences (one-sided at the border)."""
+    padded_x = F.pad(x, (1, 1, 0, 0), mode="replicate")
+    padded_y = F.pad(x, (0, 0, 1, 1), mode="replicate")
+    gx = (padded_x[..., :, 2:] - padded_x[..., :, :-2]) * 0.5
+    gy = (padded_y[..., 2:, :] - padded_y[..., :-2, :]) * 0.5
+    return gx, gy
+
+
+def pigment_density(image: torch.Tensor, density: ParamLike) -> torch.Tensor:
+    """Bousseau et al. 2006 pigment density: ``C' = C - (C - C^2) (d - 1)``.
+
+    ``d = 1`` leaves the colour unchanged, ``d > 1`` darkens (more pigment), ``d < 1``
+    lightens; white (``C = 1``) and black stay as they are. For ``d`` in [0, 2] colours in
+    [0, 1] stay in [0, 1]. The watercolor effect drives ``d`` with low-frequency noise
+    (turbulence: uneven pigment), high-frequency noise (pigment dispersion) and the paper
+    height map (granulation: pigment settling in the paper's valleys), e.g.
+    ``d = 1 + strength * (noise - 0.5)``.
+
+    Args:
+        image: ``(B, C, H, W)`` colours in [0, 1].
+        density: d; a float, ``(B,)`` or ``(B, 1, H, W)``.
+
+    Returns:
+        ``(B, C, H, W)``.
+    """
+    check_image(image)
+    d = as_map(density, image, "density")
+    return image - (image - image * image) * (d - 1.0)
+
+
+def edge_darkening(
+    image: torch.Tensor, amount: ParamLike, sigma: ParamLike = EDGE_SIGMA, scale: float | None = None
+) -> torch.Tensor:
+    """Edge darkening of Bousseau et al. 2006: pigment accumulates at the borders of a wash.
+
+    The edge strength ``e`` is the gradient magnitude (summed over channels, per reference
+    pixel, central differences) of the image smoothed by a Gaussian of ``sigma``; the
+    colour is darkened with :func:`pigment_density` at density ``d = 1 + amount * e``.
+
+    Args:
+        image: ``(B, C, H, W)`` colours in [0, 1].
+        amount: darkening strength; a float, ``(B,)`` or ``(B, 1, H, W)``. 0 leaves the image unchanged.
+        sigma: smoothing before the gradient, in pixels of a 512-pixel short side.
+        scale: pixels per reference pixel (default ``min(H, W) / 512``).
+
+    Returns:
+        ``(B, C, H, W)``.
+    """
+    check_image(image)
+    s = _scale(image, scale)
+    gx, gy = _central_differences(gaussian_blur(image, sigma, scale=s))
+    squared = (gx * gx + gy * gy).sum(dim=1, keepdim=True) * (s * s)
+    strength = torch.sqrt(squared + _MAGNITUDE_EPS * _MAGNITUDE_EPS) - _MAGNITUDE_EPS
+    return pigment_density(image, 1.0 + as_map(amount, image, "amount") * strength)
+
+
+def wobble(image: torch.Tensor, texture: torch.Tensor, amount: ParamLike, scale: float | None = None) -> torch.Tensor:
+    """Wobbling of Bousseau et al. 2006: the image displaced by the gradient of a texture.
+
+    ``out(p) = image(p + amount * grad T(p))`` sampled bilinearly (border clamped), where
+    ``grad T`` is the central-difference gradient of ``texture`` per reference pixel and the
+    displacement is in reference pixels, so the wobble looks the same at every resolution.
+
+    Args:
+        image: ``(B, C, H, W)``.
+        texture: ``(B, 1, H, W)`` height map, e.g. :func:`wise.filters.noise.paper_texture`.
+        amount: displacement in reference pixels per unit of texture slope (per reference
+            pixel); a float, ``(B,)`` or ``(B, 1, H, W)``.
+        scale: pixels per reference pixel (default ``min(H, W) / 512``).
+
+    Returns:
+        ``(B, C, H, W)``.
+    """
+    check_image(image)
+    _check_map(texture, image, "texture")
+    s = _scale(image, scale)
+    gx, gy = _central_differences(texture)
+    # slope per reference pixel is s * (per pixel); the displacement in pixels is s * (reference pixels)
+    pixels = as_map(amount, image, "amount") * (s * s)
+    offset = torch.cat((gx, gy), dim=1) * pixels
+    return sample(image, offset.expand(image.shape[0], -1, -1, -1))
+
+
+def _other_side(image: torch.Tensor, direction: torch.Tensor, distance: float) -> torch.Tensor:
+    """The colour ``distance`` pixels away across the edge, on the side that differs more.
+
+    ``direction`` has no reliable sign, so both sides are sampled and weighted by their
+    squared colour difference to the pixel: the side of the other wash dominates.
+    """
+    ahead = sample(image, direction * distance) - image
+    behind = sample(image, direction * -distance) - image
+    diff_ahead = (ahead * ahead).sum(dim=1, keepdim=True)
+    diff_behind = (behind * behind).sum(dim=1, keepdim=True)
+    norm = diff_ahead + diff_behind + _SELECTION_EPS
+    return image + (ahead * diff_ahead + behind * diff_behind) / norm
+
+
+def gaps_overlaps(
+    image: torch.Tensor,
+    edges: ParamLike,
+    direction: torch.Tensor,
+    amount: ParamLike,
+    noise: ParamLike,
+    scale: float | None = None,
+    *,
+    width: float = OVERLAP_WIDTH,
+) -> torch.Tensor:
+    """Gaps and overlaps at edges, after Montesdeoca et al. 2017.
+
+    With the band ``b = edges * noise`` (the noise breaks it up irregularly), the gap
+    strength ``g = max(-amount, 0)`` and the overlap strength ``o = max(amount, 0)``:
+
+        out = C + b * (g * (1 - C) + o * (C * C_other - C))
+
+    Gaps let the white paper show through; overlaps mix the colour subtractively
+    (multiply) with ``C_other``, the colour ``width`` reference pixels across the edge along
+    ``direction`` (whichever side differs more from ``C``), as where two washes overlap.
+
+    Args:
+        image: ``(B, C, H, W)`` colours in [0, 1].
+        edges: edge strength in [0, 1], e.g. a normalized gradient magnitude; a float,
+            ``(B,)`` or ``(B, 1, H, W)``.
+        direction: ``(B, 2, H, W)`` unit vectors across the edges (the gradient direction).
+        amount: in [-1, 1]: negative for gaps, positive for overlaps, 0 for neither.
+        noise: in [0, 1]; a float, ``(B,)`` or ``(B, 1, H, W)``.
+        scale: pixels per reference pixel (default ``min(H, W) / 512``).
+        width: how far across the edge the other colour is taken, in reference pixels.
+
+    Returns:
+        ``(B, C, H, W)``.
+    """
+    check_image(image)
+    check_direction(direction, image)
+    s = _scale(image, scale)
+    band = as_map(edges, image, "edges") * as_map(noise, image, "noise")
+    a = as_map(amount, image, "amount")
+    gap, overlap = torch.relu(-a), torch.relu(a)
+    other = _other_side(image, direction.expand(image.shape[0], -1, -1, -1), width * s)
+    change = gap * (PAPER_WHITE - image) + overlap * (image * other - image)
+    return image + band * change
+
+
+def _wet_weights(samples: int) -> list[float]:
+    """Gaussian weights of samples ``0..samples`` spaced evenly out to ``SUPPORT`` sigma."""
+    return [math.exp(-0.5 * (SUPPORT * j / samples) ** 2) for j in range(samples + 1)]
+
+
+def wet_in_wet(
+    image: torch.Tensor,
+    direction: torch.Tensor,
+    edges: ParamLike,
+    amount: ParamLike,
+    noise: ParamLike,
+    scale: float | None = None,
+    *,
+    samples: int = WET_SAMPLES,
+) -> torch.Tensor:
+    """Wet-in-wet bleeding across edges, after Wang et al. 2014.
+
+    Colours are blurred across the edges: ``samples`` bilinear samples on each side along
+    ``direction``, evenly spaced out to the reach
+    ``r = amount * (1 + NOISE_FEATHERING * (2 noise - 1))`` reference pixels (the noise makes
+    the bleeding irregular and feathered), weighted by a Gaussian of sigma ``r / 2``. The
+    bled colour is blended in where the paint is wet: ``out = C + edges * (bled - C)``.
+    Backward recomputes the samples, so memory does not grow with ``samples``.
+
+    Args:
+        image: ``(B, C, H, W)``.
+        direction: ``(B, 2, H, W)`` unit vectors across the edges (the gradient direction).
+        edges: blend weight in [0, 1], high at the edges that bleed; a float, ``(B,)`` or ``(B, 1, H, W)``.
+        amount: reach of the bleeding in reference pixels; a float, ``(B,)`` or ``(B, 1, H, W)``.
+        noise: in [0, 1]; a float, ``(B,)`` or ``(B, 1, H, W)``.
+        scale: pixels per reference pixel (default ``min(H, W) / 512``).
+        samples: samples on each side.
+
+    Returns:
+        ``(B, C, H, W)``.
+    """
+    check_image(image)
+    check_direction(direction, image)
+    if samples < 1:
+        raise WiseError(f"samples must be at least 1, got {samples}")
+    s = _scale(image, scale)
+    feathering = 1.0 + NOISE_FEATHERING * (2.0 * as_map(noise, image, "noise") - 1.0)
+    spacing = as_map(amount, image, "amount") * (s / samples) * feathering
+    step = (direction * spacing).expand(image.shape[0], -1, -1, -1)
+    weights = _wet_weights(samples)
+
+    def tap(k: int, image: torch.Tensor, step: torch.Tensor) -> tuple[torch.Tensor]:
+        j = k + 1
+        both_sides = sample(image, step * float(j)) + sample(image, step * -float(j))
+        return (both_sides * weights[j],)
+
+    (total,) = tap_sum(tap, samples, image, step)
+    bled = (image * weights[0] + total) / (weights[0] + 2.0 * sum(weights[1:]))
+    return image + as_map(edges, image, "edges") * (bled - image)
