@@ -19,7 +19,9 @@ import sys
 import time
 
 
-def run_case(effect_name: str, size: int, mode: str, local: bool, repeat: int, kernel_size: int, checkpoint: bool) -> dict:
+def run_case(
+    effect_name: str, size: int, mode: str, local: bool, repeat: int, kernel_size: int, checkpoint: bool
+) -> dict:
     import torch
     import torch.nn.functional as F
     from skimage import data
@@ -79,10 +81,18 @@ def main() -> None:
     for effect_name in args.effects:
         for size in args.sizes:
             for mode, local in (("forward", False), ("forward+backward", False), ("forward+backward", True)):
-                case = dict(effect_name=effect_name, size=size, mode=mode, local=local, repeat=args.repeat,
-                            kernel_size=args.kernel_size, checkpoint=args.checkpoint)
-                out = subprocess.run([sys.executable, __file__, "--case", json.dumps(case)],
-                                     capture_output=True, text=True, check=True)
+                case = dict(
+                    effect_name=effect_name,
+                    size=size,
+                    mode=mode,
+                    local=local,
+                    repeat=args.repeat,
+                    kernel_size=args.kernel_size,
+                    checkpoint=args.checkpoint,
+                )
+                out = subprocess.run(
+                    [sys.executable, __file__, "--case", json.dumps(case)], capture_output=True, text=True, check=True
+                )
                 row = json.loads(out.stdout.strip().splitlines()[-1])
                 rows.append(row)
                 if not args.markdown:
@@ -91,7 +101,8 @@ def main() -> None:
         print("| effect | size | pass | parameters | time | peak RSS |")
         print("| --- | --- | --- | --- | --- | --- |")
         for r in rows:
-            print(f"| {r['effect']} | {r['size']}² | {r['mode']} | {r['params']} | {r['seconds']:.2f} s | {r['peak_rss_gb']:.2f} GB |")
+            cells = [r["effect"], f"{r['size']}²", r["mode"], r["params"], f"{r['seconds']:.2f} s"]
+            print("| " + " | ".join(cells + [f"{r['peak_rss_gb']:.2f} GB"]) + " |")
 
 
 if __name__ == "__main__":

@@ -16,8 +16,8 @@ import wise
 from wise.cli import main
 from wise.effects.base import Effect
 from wise.io import read_image
-from wise.params import ParamSpec
 from wise.paramfile import save_params
+from wise.params import ParamSpec
 
 SRC = Path(wise.__file__).resolve().parent.parent
 
@@ -68,7 +68,7 @@ def test_effects_lists_xdog(capsys: pytest.CaptureFixture[str], xdog: Effect) ->
 def test_effects_marks_values_outside_range(capsys: pytest.CaptureFixture[str], xdog: Effect) -> None:
     out = run(["effects", "xdog"], capsys)[1]
     for name, preset in xdog.presets.items():
-        line = next(l for l in out.splitlines() if l.strip().startswith(name + " "))
+        line = next(row for row in out.splitlines() if row.strip().startswith(name + " "))
         for key, value in preset.items():
             marked = f"{key}={value:.6g}*" in line
             assert marked == (not xdog.spec(key).in_range(value)), line
@@ -78,7 +78,19 @@ def test_apply_preset_set_and_kernel_size(tmp_path: Path, photo: Path, capsys: p
     out1 = tmp_path / "preset.png"
     assert run(["apply", "xdog", str(photo), "-o", str(out1), "--preset", "sketch", "--device", "cpu"], capsys)[0] == 0
     out2 = tmp_path / "set.jpg"
-    argv = ["apply", "xdog", str(photo), "-o", str(out2), "--set", "blackness=0.4", "--set", "contour=2", "--kernel-size", "2"]
+    argv = [
+        "apply",
+        "xdog",
+        str(photo),
+        "-o",
+        str(out2),
+        "--set",
+        "blackness=0.4",
+        "--set",
+        "contour=2",
+        "--kernel-size",
+        "2",
+    ]
     assert run(argv, capsys) == (0, "", "")
     a, b = read_image(out1), read_image(out2)
     assert a.shape == b.shape == (1, 3, 48, 64)
@@ -88,7 +100,13 @@ def test_apply_preset_set_and_kernel_size(tmp_path: Path, photo: Path, capsys: p
 def test_apply_params_files(tmp_path: Path, photo: Path, xdog: Effect, capsys: pytest.CaptureFixture[str]) -> None:
     save_params(tmp_path / "global.safetensors", xdog, xdog.preset("portrait"))
     from_file = tmp_path / "file.png"
-    assert run(["apply", "xdog", str(photo), "-o", str(from_file), "--params", str(tmp_path / "global.safetensors")], capsys)[0] == 0
+    assert (
+        run(
+            ["apply", "xdog", str(photo), "-o", str(from_file), "--params", str(tmp_path / "global.safetensors")],
+            capsys,
+        )[0]
+        == 0
+    )
     from_preset = tmp_path / "preset.png"
     assert run(["apply", "xdog", str(photo), "-o", str(from_preset), "--preset", "portrait"], capsys)[0] == 0
     assert torch.equal(read_image(from_file), read_image(from_preset))
@@ -97,7 +115,17 @@ def test_apply_params_files(tmp_path: Path, photo: Path, xdog: Effect, capsys: p
     masks[xdog.param_names.index("contour"), :2] = 0.4
     save_params(tmp_path / "local.safetensors", xdog, masks, space="real")
     local = tmp_path / "local.png"
-    argv = ["apply", "xdog", str(photo), "-o", str(local), "--params", str(tmp_path / "local.safetensors"), "--set", "contour=1"]
+    argv = [
+        "apply",
+        "xdog",
+        str(photo),
+        "-o",
+        str(local),
+        "--params",
+        str(tmp_path / "local.safetensors"),
+        "--set",
+        "contour=1",
+    ]
     assert run(argv, capsys)[0] == 0
     assert float((read_image(local) - read_image(from_preset)).abs().max()) < 1e-2
 
@@ -149,8 +177,16 @@ EXTRA_CASES = {
 
 @pytest.mark.parametrize(
     "case",
-    ["unknown effect", "unknown parameter", "unknown preset", "out of range", "non-image input", "missing input",
-     "unwritable output", "other effect params"],
+    [
+        "unknown effect",
+        "unknown parameter",
+        "unknown preset",
+        "out of range",
+        "non-image input",
+        "missing input",
+        "unwritable output",
+        "other effect params",
+    ],
 )
 def test_refusals_in_process(case: str, tmp_path: Path, photo: Path, capsys: pytest.CaptureFixture[str]) -> None:
     argv, output, words = refusal_cases(tmp_path, photo)[case]
@@ -201,13 +237,17 @@ def test_refusals_as_subprocess(tmp_path: Path, photo: Path) -> None:
 
 def test_module_entry_point_lists_effects(tmp_path: Path) -> None:
     env = {**os.environ, "PYTHONPATH": str(SRC)}
-    proc = subprocess.run([sys.executable, "-m", "wise", "effects", "xdog"], capture_output=True, text=True, env=env, timeout=120)
+    proc = subprocess.run(
+        [sys.executable, "-m", "wise", "effects", "xdog"], capture_output=True, text=True, env=env, timeout=120
+    )
     assert proc.returncode == 0 and "stroke_width" in proc.stdout and proc.stderr == ""
 
 
 def test_gallery_writes_a_labelled_sheet(tmp_path: Path, photo: Path, capsys: pytest.CaptureFixture[str]) -> None:
     sheet = tmp_path / "sheet.png"
-    code, out, err = run(["gallery", str(photo), "-o", str(sheet), "--size", "48", "--effects", "xdog", "cartoon"], capsys)
+    code, out, err = run(
+        ["gallery", str(photo), "-o", str(sheet), "--size", "48", "--effects", "xdog", "cartoon"], capsys
+    )
     assert code == 0 and err == ""
     assert "xdog" in out and "cartoon" in out
     image = read_image(sheet)

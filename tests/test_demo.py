@@ -9,7 +9,13 @@ def test_demo_writes_both_presets_and_their_params(tmp_path) -> None:
     written = demo.run(tmp_path)
     names = sorted(p.name for p in written)
     assert names == sorted(
-        ["astronaut.png", "xdog_portrait.png", "xdog_portrait.safetensors", "xdog_sketch.png", "xdog_sketch.safetensors"]
+        [
+            "astronaut.png",
+            "xdog_portrait.png",
+            "xdog_portrait.safetensors",
+            "xdog_sketch.png",
+            "xdog_sketch.safetensors",
+        ]
     )
     rerendered = tmp_path / "again.png"
     args = ["apply", "xdog", str(tmp_path / "astronaut.png"), "--params", str(tmp_path / "xdog_sketch.safetensors")]

@@ -12,8 +12,8 @@ from safetensors.torch import save_file
 
 from wise.effects.base import Effect
 from wise.errors import WiseError
-from wise.params import ParamSpec
 from wise.paramfile import describe, load_params, save_params
+from wise.params import ParamSpec
 
 
 class Tiny(Effect):
@@ -175,9 +175,17 @@ def test_refuses_non_finite_values(tmp_path: Path, effect: Tiny) -> None:
 def test_refuses_bad_space_and_tensors(tmp_path: Path, effect: Tiny) -> None:
     refused(write_raw(tmp_path / "s.safetensors", torch.zeros(3), space="pixels"), effect, "space")
     path = tmp_path / "two.safetensors"
-    save_file({"params": torch.zeros(3), "extra": torch.zeros(1)}, str(path), metadata={
-        "format": "wise-params", "version": "1", "effect": "tiny", "parameters": json.dumps(NAMES), "space": "normalized",
-    })
+    save_file(
+        {"params": torch.zeros(3), "extra": torch.zeros(1)},
+        str(path),
+        metadata={
+            "format": "wise-params",
+            "version": "1",
+            "effect": "tiny",
+            "parameters": json.dumps(NAMES),
+            "space": "normalized",
+        },
+    )
     refused(path, effect, "exactly one tensor")
     refused(write_raw(tmp_path / "i.safetensors", torch.zeros(3, dtype=torch.int32)), effect, "floating point")
 

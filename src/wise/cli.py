@@ -49,7 +49,9 @@ def _fmt(value: float) -> str:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``wise`` command."""
-    parser = _Parser(prog=PROG, description="Whitebox image stylization: differentiable effects with editable parameters.")
+    parser = _Parser(
+        prog=PROG, description="Whitebox image stylization: differentiable effects with editable parameters."
+    )
     parser.add_argument("--version", action="version", version=f"{PROG} {__version__}")
     commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
 

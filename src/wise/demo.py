@@ -44,8 +44,10 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("out"), help="output directory (default: out)")
     args = parser.parse_args()
     run(args.out)
-    print(f"Re-render or edit with: wise apply xdog {args.out / 'astronaut.png'} "
-          f"--params {args.out / 'xdog_portrait.safetensors'} -o {args.out / 'edited.png'} --set blackness=0.3")
+    print(
+        f"Re-render or edit with: wise apply xdog {args.out / 'astronaut.png'} "
+        f"--params {args.out / 'xdog_portrait.safetensors'} -o {args.out / 'edited.png'} --set blackness=0.3"
+    )
 
 
 if __name__ == "__main__":

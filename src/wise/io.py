@@ -16,10 +16,10 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import zlib
 import os
 import tempfile
 import warnings
+import zlib
 from pathlib import Path
 from typing import Callable, Iterator
 

@@ -131,7 +131,9 @@ def load_params(path: PathLike, effect: Effect) -> torch.Tensor:
     if metadata.get("format") != FORMAT:
         raise WiseError(f"{path}: not a wise parameter file (no 'format: {FORMAT}' metadata)")
     if metadata.get("version") != VERSION:
-        raise WiseError(f"{path}: unsupported wise parameter file version {metadata.get('version')!r}; expected {VERSION!r}")
+        raise WiseError(
+            f"{path}: unsupported wise parameter file version {metadata.get('version')!r}; expected {VERSION!r}"
+        )
     made_for = metadata.get("effect")
     if made_for != effect.name:
         raise WiseError(f"{path}: parameters made for effect {made_for!r}, not for {effect.name!r}")
@@ -159,7 +161,9 @@ def load_params(path: PathLike, effect: Effect) -> torch.Tensor:
     kind = metadata.get("kind")
     actual_kind = "local" if values.dim() == 3 else "global"
     if kind is not None and kind != actual_kind:
-        raise WiseError(f"{path}: metadata says {kind!r} parameters but the tensor shape {tuple(values.shape)} is {actual_kind}")
+        raise WiseError(
+            f"{path}: metadata says {kind!r} parameters but the tensor shape {tuple(values.shape)} is {actual_kind}"
+        )
     if not values.is_floating_point():
         raise WiseError(f"{path}: parameters must be floating point, found {values.dtype}")
     values = values.to(torch.float32)
@@ -178,4 +182,3 @@ def describe(path: PathLike) -> dict[str, str]:
 
 
 __all__ = ["save_params", "load_params", "describe", "FORMAT", "VERSION"]
-

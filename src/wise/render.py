@@ -19,8 +19,11 @@ from wise.effects.base import Effect
 from wise.filters._checks import REFERENCE_SHORT_SIDE
 from wise.params import check_params
 
-DEFAULT_TILE = 1024
+DEFAULT_TILE = 2048
 """Core size of a tile in pixels."""
+TILE_ALIGNMENT = 8
+"""Tiles and halos start on multiples of this, so stages that work at a reduced resolution
+see the same pixel grid in every tile."""
 
 
 @dataclass(frozen=True)
@@ -42,7 +45,9 @@ def tiles(height: int, width: int, tile: int, halo: int) -> Iterator[Tile]:
     for y0 in range(0, height, tile):
         for x0 in range(0, width, tile):
             y1, x1 = min(y0 + tile, height), min(x0 + tile, width)
-            yield Tile(y0, y1, x0, x1, max(0, y0 - halo), min(height, y1 + halo), max(0, x0 - halo), min(width, x1 + halo))
+            yield Tile(
+                y0, y1, x0, x1, max(0, y0 - halo), min(height, y1 + halo), max(0, x0 - halo), min(width, x1 + halo)
+            )
 
 
 def masks_for_box(masks: torch.Tensor, size: tuple[int, int], box: tuple[int, int, int, int]) -> torch.Tensor:
@@ -80,11 +85,16 @@ def render(
     scale = min(height, width) / REFERENCE_SHORT_SIDE
     if max(height, width) <= tile:
         return effect(image.to(device), params.to(device), scale=scale).to(image.device)
-    halo = effect.halo(scale)
+    halo = -(-effect.halo(scale) // TILE_ALIGNMENT) * TILE_ALIGNMENT
+    tile = -(-tile // TILE_ALIGNMENT) * TILE_ALIGNMENT
     out = torch.empty_like(image)
     for t in tiles(height, width, tile, halo):
         crop = image[..., t.py0 : t.py1, t.px0 : t.px1].to(device)
-        crop_params = params if params.dim() == 2 else masks_for_box(params, (height, width), (t.py0, t.py1, t.px0, t.px1))
+        crop_params = (
+            params if params.dim() == 2 else masks_for_box(params, (height, width), (t.py0, t.py1, t.px0, t.px1))
+        )
         result = effect(crop, crop_params.to(device), scale=scale, origin=(t.py0, t.px0))
-        out[..., t.y0 : t.y1, t.x0 : t.x1] = result[..., t.y0 - t.py0 : t.y1 - t.py0, t.x0 - t.px0 : t.x1 - t.px0].to(out.device)
+        out[..., t.y0 : t.y1, t.x0 : t.x1] = result[..., t.y0 - t.py0 : t.y1 - t.py0, t.x0 - t.px0 : t.x1 - t.px0].to(
+            out.device
+        )
     return out

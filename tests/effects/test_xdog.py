@@ -19,7 +19,13 @@ def photo(astronaut: torch.Tensor) -> torch.Tensor:
 def test_api_and_presets(effect) -> None:
     assert "xdog" in wise.effects.available()
     assert [s.name for s in effect.param_specs] == [
-        "brightness", "contrast", "saturation", "details", "stroke_width", "contour", "blackness"
+        "brightness",
+        "contrast",
+        "saturation",
+        "details",
+        "stroke_width",
+        "contour",
+        "blackness",
     ]
     portrait = effect.params_to_dict(effect.preset("portrait"))
     assert portrait["details"] == pytest.approx(2.27) and portrait["blackness"] == pytest.approx(0.15)

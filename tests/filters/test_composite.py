@@ -48,9 +48,7 @@ def test_operator_known_values(operator: str) -> None:
     alpha = factor_s * ALPHA_S + factor_d * ALPHA_D
     premultiplied = [factor_s * ALPHA_S * s + factor_d * ALPHA_D * d for s, d in zip(SOURCE, DESTINATION)]
     expected = [p / alpha if alpha > 0 else 0.0 for p in premultiplied]
-    colour, result_alpha = composite(
-        _pixel(SOURCE), _pixel(DESTINATION), operator, ALPHA_S, ALPHA_D, return_alpha=True
-    )
+    colour, result_alpha = composite(_pixel(SOURCE), _pixel(DESTINATION), operator, ALPHA_S, ALPHA_D, return_alpha=True)
     assert torch.allclose(colour.flatten(), torch.tensor(expected, dtype=DOUBLE))
     assert result_alpha.item() == pytest.approx(alpha)
 
@@ -127,7 +125,7 @@ def test_blend_gradcheck(mode: str) -> None:
         base[(base - 0.5).abs() < 0.05] += 0.1
     layer = (base.detach() + 0.3 * torch.sign(_rand(2, 3, 4, 5, seed=6).detach() - 0.5)).requires_grad_()
     opacity = _rand(2, 1, 4, 5, low=0.2, high=0.9, seed=7)
-    assert gradcheck(lambda b, l, o: blend(b, l, mode, o), (base, layer, opacity), eps=1e-6, atol=1e-5, rtol=1e-3)
+    assert gradcheck(lambda b, top, o: blend(b, top, mode, o), (base, layer, opacity), eps=1e-6, atol=1e-5, rtol=1e-3)
 
 
 def test_unknown_names_and_bad_shapes() -> None:

@@ -49,7 +49,9 @@ def test_lab_round_trip_gradients() -> None:
 
 def test_hsv_gradients() -> None:
     _check(W.rgb_to_hsv, _rand(1, 3, 4, 5, low=0.1, high=0.9))
-    hsv = torch.stack([torch.rand(1, 4, 5) * 0.9 + 0.02, torch.rand(1, 4, 5) * 0.6 + 0.2, torch.rand(1, 4, 5) * 0.6 + 0.3], 1)
+    hsv = torch.stack(
+        [torch.rand(1, 4, 5) * 0.9 + 0.02, torch.rand(1, 4, 5) * 0.6 + 0.2, torch.rand(1, 4, 5) * 0.6 + 0.3], 1
+    )
     _check(W.hsv_to_rgb, hsv.to(DOUBLE).requires_grad_())
 
 

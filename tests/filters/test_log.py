@@ -71,8 +71,8 @@ def test_bright_line_gives_a_strong_negative_centre() -> None:
 def test_step_is_negative_on_the_bright_side() -> None:
     step = _vertical((torch.arange(SIZE) >= CENTRE).to(DOUBLE))
     row = flow_log(step, ALONG_Y, 2.0, scale=1.0)[0, 0, CENTRE]
-    assert row[CENTRE:CENTRE + 4].max() < -0.1
-    assert row[CENTRE - 4:CENTRE].min() > 0.1
+    assert row[CENTRE : CENTRE + 4].max() < -0.1
+    assert row[CENTRE - 4 : CENTRE].min() > 0.1
     assert float(row.abs().max()) == pytest.approx(1.0 / math.sqrt(2.0 * math.pi * math.e), rel=0.05)
 
 
@@ -96,8 +96,10 @@ def test_rotating_the_pattern_with_the_tangent_gives_the_same_response() -> None
     straight = flow_log(torch.sin(frequency * xs).view(1, 1, SIZE, SIZE), ALONG_Y, 2.0, scale=1.0)
     diagonal_image = torch.sin(frequency * (xs + ys) / math.sqrt(2.0)).view(1, 1, SIZE, SIZE)
     diagonal = flow_log(diagonal_image, _field(1 / math.sqrt(2.0), -1 / math.sqrt(2.0)), 2.0, scale=1.0)
-    expected = straight[0, 0, CENTRE, CENTRE] * torch.sin(frequency * (xs + ys) / math.sqrt(2.0)) / math.sin(
-        frequency * CENTRE
+    expected = (
+        straight[0, 0, CENTRE, CENTRE]
+        * torch.sin(frequency * (xs + ys) / math.sqrt(2.0))
+        / math.sin(frequency * CENTRE)
     )
     inner = slice(10, -10)
     amplitude = float(straight[0, 0, CENTRE, inner].abs().max())

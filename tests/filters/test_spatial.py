@@ -12,7 +12,11 @@ from wise.filters.sampling import tap_sum
 def _stripes(size: int = 64, vertical: bool = True) -> torch.Tensor:
     coords = torch.arange(size, dtype=torch.float32)
     wave = (torch.sin(coords / 3.0) > 0).float()
-    image = wave.view(1, 1, 1, size).expand(1, 1, size, size) if vertical else wave.view(1, 1, size, 1).expand(1, 1, size, size)
+    image = (
+        wave.view(1, 1, 1, size).expand(1, 1, size, size)
+        if vertical
+        else wave.view(1, 1, size, 1).expand(1, 1, size, size)
+    )
     return image.contiguous()
 
 

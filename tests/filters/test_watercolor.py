@@ -83,7 +83,11 @@ def test_gaps_overlaps_gradients(low: float, high: float) -> None:
     noise = _rand(2, 1, 7, 8, seed=5)
     _check(
         lambda i, e, d, a, n: gaps_overlaps(i, e, _unit(d), a, n, scale=1.3),
-        image, edges, direction, amount, noise,
+        image,
+        edges,
+        direction,
+        amount,
+        noise,
     )
 
 
@@ -95,7 +99,11 @@ def test_wet_in_wet_gradients() -> None:
     noise = _rand(2, 1, 7, 8, seed=5)
     _check(
         lambda i, d, e, a, n: wet_in_wet(i, _unit(d), e, a, n, scale=1.0, samples=3),
-        image, direction, edges, amount, noise,
+        image,
+        direction,
+        edges,
+        amount,
+        noise,
     )
 
 
@@ -141,7 +149,7 @@ def test_wobble_moves_a_step_by_the_texture_slope(scale: float, shift: float) ->
     amount = shift / scale / slope  # displacement ``shift`` pixels, ``shift / scale`` reference pixels
     out = wobble(image, texture, amount, scale=scale)[0, 0, 4]
     # out(x) = image(x + shift): the step moves left by ``shift`` pixels
-    expected = ((torch.arange(48, dtype=torch.float32) + shift - 23.0).clamp(0.0, 1.0))
+    expected = (torch.arange(48, dtype=torch.float32) + shift - 23.0).clamp(0.0, 1.0)
     assert torch.allclose(out[2:-8], expected[2:-8], atol=1e-5)
 
 

@@ -62,7 +62,9 @@ class Effect(nn.Module):
         for s in self.param_specs:
             if s.name == name:
                 return s
-        raise WiseError(f"effect {self.name!r} has no parameter {name!r}; its parameters: {', '.join(self.param_names)}")
+        raise WiseError(
+            f"effect {self.name!r} has no parameter {name!r}; its parameters: {', '.join(self.param_names)}"
+        )
 
     def default_params(self) -> torch.Tensor:
         """The defaults as a ``(P,)`` normalized tensor."""
@@ -104,7 +106,9 @@ class Effect(nn.Module):
         if not image.is_floating_point():
             raise WiseError(f"image must be a float tensor in [0, 1], got {image.dtype}")
         if min(image.shape[-2:]) < 8:
-            raise WiseError(f"image is too small ({image.shape[-2]}x{image.shape[-1]}); both sides must be at least 8 pixels")
+            raise WiseError(
+                f"image is too small ({image.shape[-2]}x{image.shape[-1]}); both sides must be at least 8 pixels"
+            )
         params = P.check_params(params, self.param_specs, image.shape[0]).to(image)
         values = P.real_maps(params, self.param_specs, tuple(image.shape[-2:]))
         if scale is None:

@@ -2,22 +2,19 @@
 
 from __future__ import annotations
 
-import math
 from typing import Mapping
 
 import torch
 
 from wise.effects.base import Effect, RenderContext
-from wise.effects.common import LUMINANCE_RANGE, STRUCTURE_SMOOTHING, detail_sigmas, edge_flow, xdog_lines
+from wise.effects.common import LUMINANCE_RANGE, detail_sigmas, edge_flow, flow_pipeline_halo, xdog_lines
 from wise.filters import adjust_color, lab_to_rgb, oriented_bilateral, rgb_to_lab
 from wise.filters.composite import blend
-from wise.filters.gaussian import SUPPORT
 from wise.filters.quantize import quantize
 from wise.params import ParamSpec
 
 ABSTRACTION_ITERATIONS = 2
 """Applications of the orientation-aligned bilateral filter (Winnemöller et al. use a few)."""
-DIAGONAL_STEP = math.sqrt(2.0)
 
 
 class Cartoon(Effect):
@@ -69,12 +66,7 @@ class Cartoon(Effect):
     }
 
     def halo(self, scale: float) -> int:
-        most = detail_sigmas(torch.tensor(0.0))
-        structure_reach = float(most["structure"]) + SUPPORT * STRUCTURE_SMOOTHING
-        flow_reach = (structure_reach + SUPPORT * float(most["edge_smoothing"])) * scale
-        bilateral_reach = ABSTRACTION_ITERATIONS * 2 * 2 * self.kernel_size
-        sample_reach = DIAGONAL_STEP * (bilateral_reach + 2 * (self.kernel_size + 2))
-        return math.ceil(flow_reach + sample_reach) + 2
+        return flow_pipeline_halo(scale, self.kernel_size, ABSTRACTION_ITERATIONS)
 
     def render(self, image: torch.Tensor, p: Mapping[str, torch.Tensor], ctx: RenderContext) -> torch.Tensor:
         sigmas = detail_sigmas(p["details"])

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import torch
 
 from wise.filters import (
@@ -11,6 +13,7 @@ from wise.filters import (
     smoothed_structure_tensor,
     xdog_threshold,
 )
+from wise.filters.gaussian import SUPPORT
 
 STRUCTURE_SMOOTHING = 1.5
 """Sigma of the Gaussian that smooths the structure tensor (reference pixels)."""
@@ -20,6 +23,8 @@ EDGE_SHARPNESS = 1000.0
 """phi of the XDoG soft threshold, in units of normalized luminance."""
 LUMINANCE_RANGE = 100.0
 """CIE L* of white; luminance is normalized to [0, 1] before the DoG."""
+DIAGONAL_STEP = math.sqrt(2.0)
+"""Longest distance of one pixel step along a direction field."""
 
 
 def detail_sigmas(details: torch.Tensor) -> dict[str, torch.Tensor]:
@@ -62,3 +67,14 @@ def xdog_lines(
     edges = flow_dog(luminance, tangent, stroke_width, CONTOUR_GAIN * contour, 2 * (kernel_size + 2), scale)
     smoothed = flow_smoothing(edges, tangent, edge_smoothing, scale=scale)
     return xdog_threshold(smoothed, blackness, EDGE_SHARPNESS)
+
+
+def flow_pipeline_halo(scale: float, kernel_size: int, bilateral_applications: int) -> int:
+    """Pixels read around a tile by edge flow -> oriented bilateral (applied
+    ``bilateral_applications`` times) -> XDoG lines, at the largest sigmas ``details`` allows."""
+    coarsest = detail_sigmas(torch.tensor(0.0))
+    structure_reach = float(coarsest["structure"]) + SUPPORT * STRUCTURE_SMOOTHING
+    flow_reach = (structure_reach + SUPPORT * float(coarsest["edge_smoothing"])) * scale
+    bilateral_steps = bilateral_applications * 2 * 2 * kernel_size
+    dog_steps = 2 * (kernel_size + 2)
+    return math.ceil(flow_reach + DIAGONAL_STEP * (bilateral_steps + dog_steps)) + 2

@@ -141,7 +141,9 @@ class OilPaint(Effect):
 
         bristles = value_noise(lab[:, :1], BRISTLE_CELL, self.seed, octaves=2, origin=ctx.origin, scale=scale) - 0.5
         strokes = self.stage(flow_smoothing, bristles, tangent, p["stroke_length"], MAX_STROKE_STEPS, scale)
-        grooves = self.stage(flow_smoothing, strokes, gradient_direction(tangent), p["brush_size"], MAX_STROKE_STEPS, scale)
+        grooves = self.stage(
+            flow_smoothing, strokes, gradient_direction(tangent), p["brush_size"], MAX_STROKE_STEPS, scale
+        )
         height = BRISTLE_GAIN * grooves
         lit = self.stage(
             bump_phong,

@@ -2,19 +2,14 @@
 
 from __future__ import annotations
 
-import math
 from typing import Mapping
 
 import torch
 
 from wise.effects.base import Effect, RenderContext
-from wise.effects.common import LUMINANCE_RANGE, STRUCTURE_SMOOTHING, detail_sigmas, edge_flow, xdog_lines
+from wise.effects.common import LUMINANCE_RANGE, detail_sigmas, edge_flow, flow_pipeline_halo, xdog_lines
 from wise.filters import adjust_color, oriented_bilateral, rgb_to_lab
-from wise.filters.gaussian import SUPPORT
 from wise.params import ParamSpec
-
-DIAGONAL_STEP = math.sqrt(2.0)
-"""Longest distance of one pixel step along a direction field."""
 
 
 class XDoG(Effect):
@@ -57,11 +52,7 @@ class XDoG(Effect):
     }
 
     def halo(self, scale: float) -> int:
-        most = detail_sigmas(torch.tensor(0.0))
-        structure_reach = float(most["structure"]) + SUPPORT * STRUCTURE_SMOOTHING
-        flow_reach = (structure_reach + SUPPORT * float(most["edge_smoothing"])) * scale
-        sample_reach = DIAGONAL_STEP * (2 * 2 * self.kernel_size + 2 * (self.kernel_size + 2))
-        return math.ceil(flow_reach + sample_reach) + 2
+        return flow_pipeline_halo(scale, self.kernel_size, 1)
 
     def render(self, image: torch.Tensor, p: Mapping[str, torch.Tensor], ctx: RenderContext) -> torch.Tensor:
         scale = ctx.scale

@@ -147,9 +147,7 @@ def bilateral_pass(
     direction = direction.expand(image.shape[0], -1, -1, -1)
     step = pixel_step(direction)
 
-    total, norm = _BilateralTaps.apply(
-        image, direction, step, spatial, neg_inv_two_spatial_sq, neg_inv_two_range_sq, n
-    )
+    total, norm = _BilateralTaps.apply(image, direction, step, spatial, neg_inv_two_spatial_sq, neg_inv_two_range_sq, n)
     return (image + total) / (1.0 + norm)
 
 

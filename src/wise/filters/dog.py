@@ -37,9 +37,7 @@ class _DogTaps(torch.autograd.Function):
         sum_narrow, sum_wide = torch.zeros_like(image), torch.zeros_like(image)
         norm_narrow, norm_wide = torch.zeros_like(step), torch.zeros_like(step)
         for i in range(1, steps + 1):
-            distance, _, w_narrow, w_wide = _DogTaps._weights(
-                i, step, wide, neg_inv_two_narrow_sq, neg_inv_two_wide_sq
-            )
+            distance, _, w_narrow, w_wide = _DogTaps._weights(i, step, wide, neg_inv_two_narrow_sq, neg_inv_two_wide_sq)
             both_sides = sample(image, direction * distance) + sample(image, direction * -distance)
             sum_narrow.addcmul_(w_narrow, both_sides)
             sum_wide.addcmul_(w_wide, both_sides)

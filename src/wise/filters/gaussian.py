@@ -54,7 +54,9 @@ def _blur_axis_varying(image: torch.Tensor, sigma: torch.Tensor, axis: int) -> t
     def tap(k: int, padded, sigma, neg_inv_two_sigma_sq):
         shifted = padded.narrow(axis, k, size)
         distance = float(k - radius)
-        weight = torch.exp(distance * distance * neg_inv_two_sigma_sq) * in_support(abs(distance), sigma, abs(distance) <= 1)
+        weight = torch.exp(distance * distance * neg_inv_two_sigma_sq) * in_support(
+            abs(distance), sigma, abs(distance) <= 1
+        )
         return weight * shifted, weight
 
     total, norm = tap_sum(tap, 2 * radius + 1, padded, sigma, neg_inv_two_sigma_sq)

@@ -54,9 +54,7 @@ def _layer_key(seed: int, layer: int) -> int:
     return (seed * _SEED_STRIDE + layer * _MIX_B + layer) & _MASK_32
 
 
-def _lattice_values(
-    us: torch.Tensor, vs: torch.Tensor, key: int, dtype: torch.dtype
-) -> torch.Tensor:
+def _lattice_values(us: torch.Tensor, vs: torch.Tensor, key: int, dtype: torch.dtype) -> torch.Tensor:
     """Values in [0, 1) at the integer lattice points ``vs x us``: ``(len(vs), len(us))``."""
     h = _mix(torch.full_like(us, key) ^ (us & _MASK_32))
     h = _mix(h.view(1, -1) ^ (vs.view(-1, 1) & _MASK_32))

@@ -113,9 +113,7 @@ def sample_backward(
     the sampling offset in pixels, ``(B, 2, H, W)``.
     """
     _, _, h, w = image.shape
-    g_image, g_grid = torch.ops.aten.grid_sampler_2d_backward(
-        grad_value, image, grid, 0, 1, True, [need_image, True]
-    )
+    g_image, g_grid = torch.ops.aten.grid_sampler_2d_backward(grad_value, image, grid, 0, 1, True, [need_image, True])
     pixels_per_grid_unit = grad_value.new_tensor([2.0 / max(w - 1, 1), 2.0 / max(h - 1, 1)]).view(1, 2, 1, 1)
     return (g_image if need_image else None), g_grid.permute(0, 3, 1, 2) * pixels_per_grid_unit
 

@@ -87,9 +87,7 @@ def bump_phong(
     check_image(color, "color")
     check_image(height, "height", channels=1)
     if height.shape[-2:] != color.shape[-2:] or height.shape[0] not in (1, color.shape[0]):
-        raise WiseError(
-            f"height {tuple(height.shape)} must be a (B, 1, H, W) map matching color {tuple(color.shape)}"
-        )
+        raise WiseError(f"height {tuple(height.shape)} must be a (B, 1, H, W) map matching color {tuple(color.shape)}")
     light_x, light_y, light_z = _unit_light(light_direction)
     pixels_per_reference = resolution_scale(color) if scale is None else scale
     dh_dx, dh_dy = height_gradient(height, pixels_per_reference)
