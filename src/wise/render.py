@@ -19,8 +19,10 @@ from wise.effects.base import Effect
 from wise.filters._checks import REFERENCE_SHORT_SIDE
 from wise.params import check_params
 
-DEFAULT_TILE = 2048
-"""Core size of a tile in pixels."""
+TILE_PIXELS = 9_000_000
+"""Most pixels of a padded tile: bounds the memory of a render (a few GB for every effect)."""
+MAX_SPLITS = 64
+"""Most tiles along one side considered when choosing the tile layout."""
 TILE_ALIGNMENT = 8
 """Tiles and halos start on multiples of this, so stages that work at a reduced resolution
 see the same pixel grid in every tile."""
@@ -40,14 +42,37 @@ class Tile:
     px1: int
 
 
-def tiles(height: int, width: int, tile: int, halo: int) -> Iterator[Tile]:
-    """Cover ``height x width`` with cores of at most ``tile`` pixels, padded by ``halo``."""
-    for y0 in range(0, height, tile):
-        for x0 in range(0, width, tile):
-            y1, x1 = min(y0 + tile, height), min(x0 + tile, width)
+def tiles(height: int, width: int, tile: int | tuple[int, int], halo: int) -> Iterator[Tile]:
+    """Cover ``height x width`` with cores of at most ``tile`` (rows, columns) pixels, padded by ``halo``."""
+    tile_h, tile_w = (tile, tile) if isinstance(tile, int) else tile
+    for y0 in range(0, height, tile_h):
+        for x0 in range(0, width, tile_w):
+            y1, x1 = min(y0 + tile_h, height), min(x0 + tile_w, width)
             yield Tile(
                 y0, y1, x0, x1, max(0, y0 - halo), min(height, y1 + halo), max(0, x0 - halo), min(width, x1 + halo)
             )
+
+
+def _align(value: int) -> int:
+    return -(-value // TILE_ALIGNMENT) * TILE_ALIGNMENT
+
+
+def tile_shape(height: int, width: int, halo: int, max_pixels: int = TILE_PIXELS) -> tuple[int, int]:
+    """The core (rows, columns) that covers the picture with the fewest pixels processed,
+    halos included, while no padded tile exceeds ``max_pixels`` (strips when that is cheapest)."""
+    best: tuple[int, tuple[int, int]] | None = None
+    for rows in range(1, min(MAX_SPLITS, -(-height // TILE_ALIGNMENT)) + 1):
+        for columns in range(1, min(MAX_SPLITS, -(-width // TILE_ALIGNMENT)) + 1):
+            shape = (_align(-(-height // rows)), _align(-(-width // columns)))
+            padded = [(t.py1 - t.py0) * (t.px1 - t.px0) for t in tiles(height, width, shape, halo)]
+            if max(padded) <= max_pixels:
+                if best is None or sum(padded) < best[0]:
+                    best = (sum(padded), shape)
+                break  # more columns only add halo
+    if best is None:
+        side = max(TILE_ALIGNMENT, _align(int(max_pixels**0.5) - 2 * halo))
+        return side, side
+    return best[1]
 
 
 def masks_for_box(masks: torch.Tensor, size: tuple[int, int], box: tuple[int, int, int, int]) -> torch.Tensor:
@@ -71,24 +96,26 @@ def render(
     effect: Effect,
     image: torch.Tensor,
     params: torch.Tensor,
-    tile: int = DEFAULT_TILE,
+    tile: int | None = None,
     device: torch.device | str | None = None,
 ) -> torch.Tensor:
     """Render ``effect`` on ``image`` (B, 3, H, W) without autograd, in tiles when it is large.
 
-    Memory stays that of one padded tile; the result, on ``image``'s device, equals rendering
-    the whole picture at once up to floating-point rounding.
+    ``tile`` forces square cores of that size; by default the layout processes the fewest
+    pixels with no padded tile above :data:`TILE_PIXELS`. Memory stays that of one padded
+    tile; the result, on ``image``'s device, equals rendering the whole picture at once up
+    to floating-point rounding.
     """
     device = torch.device(device) if device is not None else image.device
     batch, _, height, width = image.shape
     params = check_params(params, effect.param_specs, batch)
     scale = min(height, width) / REFERENCE_SHORT_SIDE
-    if max(height, width) <= tile:
+    if (tile is None and height * width <= TILE_PIXELS) or (tile is not None and max(height, width) <= tile):
         return effect(image.to(device), params.to(device), scale=scale).to(image.device)
-    halo = -(-effect.halo(scale) // TILE_ALIGNMENT) * TILE_ALIGNMENT
-    tile = -(-tile // TILE_ALIGNMENT) * TILE_ALIGNMENT
+    halo = _align(effect.halo(scale))
+    shape = tile_shape(height, width, halo) if tile is None else (_align(tile), _align(tile))
     out = torch.empty_like(image)
-    for t in tiles(height, width, tile, halo):
+    for t in tiles(height, width, shape, halo):
         crop = image[..., t.py0 : t.py1, t.px0 : t.px1].to(device)
         crop_params = (
             params if params.dim() == 2 else masks_for_box(params, (height, width), (t.py0, t.py1, t.px0, t.px1))

@@ -13,6 +13,7 @@ from wise.filters import (
     smoothed_structure_tensor,
     xdog_threshold,
 )
+from wise.filters.dog import WIDE_TO_NARROW
 from wise.filters.gaussian import SUPPORT
 
 STRUCTURE_SMOOTHING = 1.5
@@ -23,6 +24,8 @@ EDGE_SHARPNESS = 1000.0
 """phi of the XDoG soft threshold, in units of normalized luminance."""
 LUMINANCE_RANGE = 100.0
 """CIE L* of white; luminance is normalized to [0, 1] before the DoG."""
+MAX_STROKE_WIDTH = 1.2
+"""Largest ``stroke_width`` (DoG sigma, reference pixels) the effects offer."""
 DIAGONAL_STEP = math.sqrt(2.0)
 """Longest distance of one pixel step along a direction field."""
 
@@ -64,7 +67,7 @@ def xdog_lines(
     ``luminance`` is normalized to [0, 1]; DoG across the flow, line-integral smoothing along
     it, soft threshold at ``blackness``.
     """
-    edges = flow_dog(luminance, tangent, stroke_width, CONTOUR_GAIN * contour, 2 * (kernel_size + 2), scale)
+    edges = flow_dog(luminance, tangent, stroke_width, CONTOUR_GAIN * contour, kernel_size + 2, scale)
     smoothed = flow_smoothing(edges, tangent, edge_smoothing, scale=scale)
     return xdog_threshold(smoothed, blackness, EDGE_SHARPNESS)
 
@@ -76,5 +79,5 @@ def flow_pipeline_halo(scale: float, kernel_size: int, bilateral_applications: i
     structure_reach = float(coarsest["structure"]) + SUPPORT * STRUCTURE_SMOOTHING
     flow_reach = (structure_reach + SUPPORT * float(coarsest["edge_smoothing"])) * scale
     bilateral_steps = bilateral_applications * 2 * 2 * kernel_size
-    dog_steps = 2 * (kernel_size + 2)
-    return math.ceil(flow_reach + DIAGONAL_STEP * (bilateral_steps + dog_steps)) + 2
+    dog_reach = max(kernel_size + 2, SUPPORT * WIDE_TO_NARROW * MAX_STROKE_WIDTH * scale)
+    return math.ceil(flow_reach + DIAGONAL_STEP * (bilateral_steps + dog_reach)) + 2

@@ -111,7 +111,8 @@ def flow_dog(
         tangent: ``(B, 2, H, W)`` edge tangent flow (unit vectors).
         sigma: narrow sigma in pixels of a 512-pixel short side.
         sharpen: p, the weight of the DoG edge response.
-        max_steps: the most pixel steps sampled on each side.
+        max_steps: the most samples on each side; a wider kernel is sampled every few
+            pixels instead of every pixel, so the cost does not grow with the resolution.
         scale: pixels per reference pixel (default ``min(H, W) / 512``).
 
     Returns:
@@ -122,9 +123,11 @@ def flow_dog(
     s = resolution_scale(image) if scale is None else scale
     narrow = (as_map(sigma, image, "sigma") * s).clamp_min(MIN_SIGMA)
     wide = narrow * WIDE_TO_NARROW
-    steps = max(1, min(max_steps, math.floor(SUPPORT * max_value(wide))))
+    reach = SUPPORT * max_value(wide)
+    spacing = max(1.0, reach / max_steps)
+    steps = max(1, min(max_steps, math.floor(reach / spacing)))
     direction = gradient_direction(tangent)
-    step = pixel_step(direction)
+    step = pixel_step(direction) * spacing
 
     neg_inv_two_narrow_sq = -0.5 / narrow.square()
     neg_inv_two_wide_sq = -0.5 / wide.square()
