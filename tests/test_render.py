@@ -4,7 +4,7 @@ import torch.nn.functional as F
 
 import wise
 from wise.params import resize_masks
-from wise.render import masks_for_box, render, tiles
+from wise.render import masks_for_box, render, tile_shape, tiles
 
 
 def test_tiles_cover_the_picture_once() -> None:
@@ -13,6 +13,18 @@ def test_tiles_cover_the_picture_once() -> None:
         covered[t.y0 : t.y1, t.x0 : t.x1] += 1
         assert t.py0 <= t.y0 and t.py1 >= t.y1 and t.px0 <= t.x0 and t.px1 >= t.x1
     assert torch.equal(covered, torch.ones_like(covered))
+
+
+@pytest.mark.parametrize(("height", "width", "halo"), [(4096, 4096, 368), (3000, 5000, 176), (16000, 9000, 320)])
+def test_tile_layout_respects_the_pixel_budget(height: int, width: int, halo: int) -> None:
+    budget = 9_000_000
+    shape = tile_shape(height, width, halo, budget)
+    layout = list(tiles(height, width, shape, halo))
+    padded = [(t.py1 - t.py0) * (t.px1 - t.px0) for t in layout]
+    assert max(padded) <= budget
+    assert sum((t.y1 - t.y0) * (t.x1 - t.x0) for t in layout) == height * width
+    square = list(tiles(height, width, 2048, halo))
+    assert sum(padded) <= sum((t.py1 - t.py0) * (t.px1 - t.px0) for t in square)
 
 
 def test_mask_crops_match_resizing_the_whole_mask() -> None:

@@ -40,8 +40,10 @@ BRISTLE_GAIN = 6.0
 """Scales the smeared noise to a paint height of roughly unit contrast."""
 EDGE_SIGMA = 1.0
 """Sigma of the flow-based Laplacian of Gaussian that enhances edges (reference pixels)."""
-MAX_STROKE_STEPS = 24
-"""Most line-integral steps per side for the strokes (bounds the cost of long strokes)."""
+MAX_STROKE_STEPS = 8
+"""Most line-integral steps per side for the strokes (long strokes take longer steps)."""
+MAX_EDGE_STEPS = 6
+"""Most samples per side of the edge-enhancing LoG."""
 LIGHT_DIRECTION = (-1.0, -1.0, 1.5)
 """Light from the top left, in front of the canvas."""
 
@@ -155,5 +157,7 @@ class OilPaint(Effect):
             shininess=p["shininess"],
             scale=scale,
         )
-        edges = self.stage(flow_log, abstracted[:, :1] / LUMINANCE_RANGE, tangent, EDGE_SIGMA, scale)
+        edges = self.stage(
+            flow_log, abstracted[:, :1] / LUMINANCE_RANGE, tangent, EDGE_SIGMA, scale, MAX_EDGE_STEPS
+        )
         return (lit - p["edge_enhancement"] * edges).clamp(0.0, 1.0)

@@ -154,8 +154,9 @@ def flow_smoothing(
     Line integral convolution (Cabral & Leedom 1993) with a Gaussian of ``sigma``,
     cut off at two sigma (nearest samples always count), as in the flow-based DoG and bilateral filters of Kyprianidis &
     Döllner 2008. Streamlines follow ``tangent`` in steps of one reference pixel (at least
-    one pixel), so the cost does not grow with the resolution; gradients reach the image
-    and ``sigma`` (the streamline geometry is treated as fixed).
+    one pixel, longer when ``max_steps`` would not reach two sigma), so the cost does not
+    grow with the resolution; gradients reach the image and ``sigma`` (the streamline
+    geometry is treated as fixed).
 
     Args:
         image: ``(B, C, H, W)``.
@@ -171,8 +172,9 @@ def flow_smoothing(
     check_direction(tangent, image, "tangent")
     s = resolution_scale(image) if scale is None else scale
     sigma_px = (as_map(sigma, image, "sigma") * s).clamp_min(MIN_SIGMA)
-    step_length = max(1.0, s)
-    steps = max(1, min(max_steps, math.floor(SUPPORT * max_value(sigma_px) / step_length)))
+    reach = SUPPORT * max_value(sigma_px)
+    step_length = max(1.0, s, reach / max_steps)
+    steps = max(1, min(max_steps, math.floor(reach / step_length)))
     grids = trace_streamlines(tangent.detach(), steps, step_length)
 
     neg_inv_two_sigma_sq = -0.5 / sigma_px.square()

@@ -17,6 +17,13 @@ SUPPORT = 2.0
 so that a sub-pixel sigma still smooths a little and keeps a gradient."""
 
 
+PYRAMID_SIGMA = 3.0
+"""A fixed sigma of at least twice this many pixels is applied to a reduced copy (same result
+up to interpolation, a fraction of the cost), keeping at least this sigma at the reduced size."""
+MAX_PYRAMID_REDUCTION = 8
+"""Largest reduction factor (the tile alignment of :mod:`wise.render`)."""
+
+
 def in_support(distance: torch.Tensor | float, sigma: torch.Tensor, nearest: bool) -> torch.Tensor:
     """Mask of the samples a Gaussian of ``sigma`` uses; ``nearest`` marks the nearest neighbours."""
     if nearest:
@@ -41,6 +48,17 @@ def _blur_axis_fixed(image: torch.Tensor, sigma: float, axis: int) -> torch.Tens
         weight = kernel.view(1, 1, -1, 1).expand(channels, 1, -1, 1)
         padded = F.pad(image, (0, 0, radius, radius), mode="replicate")
     return F.conv2d(padded, weight, groups=channels)
+
+
+def _blur_by_pyramid(image: torch.Tensor, pixels: float) -> torch.Tensor:
+    # A wide Gaussian of a smooth result: blur a box-reduced copy and interpolate it back.
+    # Reductions are powers of two anchored at the top-left pixel, so tiles whose origins are
+    # multiples of the reduction see the same grid as the whole picture.
+    factor = min(MAX_PYRAMID_REDUCTION, 2 ** int(math.log2(pixels / PYRAMID_SIGMA)))
+    height, width = image.shape[-2:]
+    reduced = F.avg_pool2d(image, factor, ceil_mode=True)
+    blurred = _blur_axis_fixed(_blur_axis_fixed(reduced, pixels / factor, 3), pixels / factor, 2)
+    return F.interpolate(blurred, scale_factor=factor, mode="bilinear", align_corners=False)[..., :height, :width]
 
 
 def _blur_axis_varying(image: torch.Tensor, sigma: torch.Tensor, axis: int) -> torch.Tensor:
@@ -80,6 +98,8 @@ def gaussian_blur(image: torch.Tensor, sigma: ParamLike, scale: float | None = N
     s = resolution_scale(image) if scale is None else scale
     if isinstance(sigma, (int, float)):
         pixels = max(float(sigma) * s, MIN_SIGMA)
+        if pixels >= 2 * PYRAMID_SIGMA:
+            return _blur_by_pyramid(image, pixels)
         return _blur_axis_fixed(_blur_axis_fixed(image, pixels, 3), pixels, 2)
     pixels = (as_map(sigma, image, "sigma") * s).clamp_min(MIN_SIGMA)
     return _blur_axis_varying(_blur_axis_varying(image, pixels, 3), pixels, 2)

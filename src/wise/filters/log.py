@@ -70,7 +70,7 @@ def flow_log(
         tangent: ``(B, 2, H, W)`` edge tangent flow (unit vectors).
         sigma: in pixels of a 512-pixel short side; float, ``(B,)`` or ``(B, 1, H, W)``.
         scale: pixels per reference pixel (default ``min(H, W) / 512``).
-        max_steps: the most pixel steps sampled on each side.
+        max_steps: the most samples on each side; a wider kernel is sampled every few pixels.
 
     Returns:
         ``(B, C, H, W)``.
@@ -79,9 +79,11 @@ def flow_log(
     check_direction(tangent, image, "tangent")
     s = resolution_scale(image) if scale is None else scale
     sigma_px = (as_map(sigma, image, "sigma") * s).clamp_min(MIN_SIGMA)
-    steps = max(1, min(max_steps, math.floor(EXTENT * max_value(sigma_px))))
+    reach = EXTENT * max_value(sigma_px)
+    spacing = max(1.0, reach / max_steps)
+    steps = max(1, min(max_steps, math.floor(reach / spacing)))
     direction = gradient_direction(tangent).expand(image.shape[0], -1, -1, -1)
-    step = pixel_step(direction)
+    step = pixel_step(direction) * spacing
 
     second_v, gauss_v, second, gauss, second_u2, gauss_u2 = tap_sum(
         _log_tap, steps, image, direction, step, 1.0 / sigma_px
