@@ -52,8 +52,18 @@ def main() -> None:
         masks = (base[None, :, None, None] + smooth_variation(len(base), seed=1)).clamp(-0.5, 0.5)
         params_path = work / f"{name}.safetensors"
         save_params(params_path, effect, masks)
-        command = [sys.executable, "-m", "wise", "apply", name, str(source), "--params", str(params_path),
-                   "-o", str(work / f"{name}.png")]
+        command = [
+            sys.executable,
+            "-m",
+            "wise",
+            "apply",
+            name,
+            str(source),
+            "--params",
+            str(params_path),
+            "-o",
+            str(work / f"{name}.png"),
+        ]
         start = time.perf_counter()
         child = subprocess.Popen(command)
         _, status, usage = os.wait4(child.pid, 0)

@@ -157,7 +157,5 @@ class OilPaint(Effect):
             shininess=p["shininess"],
             scale=scale,
         )
-        edges = self.stage(
-            flow_log, abstracted[:, :1] / LUMINANCE_RANGE, tangent, EDGE_SIGMA, scale, MAX_EDGE_STEPS
-        )
+        edges = self.stage(flow_log, abstracted[:, :1] / LUMINANCE_RANGE, tangent, EDGE_SIGMA, scale, MAX_EDGE_STEPS)
         return (lit - p["edge_enhancement"] * edges).clamp(0.0, 1.0)

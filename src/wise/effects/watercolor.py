@@ -20,8 +20,8 @@ from wise.filters import (
 from wise.filters.composite import blend
 from wise.filters.gaussian import SUPPORT
 from wise.filters.kuwahara import anisotropic_kuwahara
-from wise.filters.upsample import downsample, joint_bilateral_upsample
 from wise.filters.noise import paper_texture, value_noise
+from wise.filters.upsample import downsample, joint_bilateral_upsample
 from wise.filters.watercolor import edge_darkening, gaps_overlaps, pigment_density, wet_in_wet, wobble
 from wise.params import ParamSpec
 
