@@ -1,29 +1,11 @@
 """Every filter's analytic gradients against finite differences (float64, tiny images)."""
 
-import math
-
 import pytest
 import torch
 from torch.autograd import gradcheck
 
+from tests.filters.helpers import DOUBLE, rand, unit, unit_field
 from wise import filters as W
-
-DOUBLE = torch.float64
-
-
-def _rand(*shape: int, low: float = 0.0, high: float = 1.0, seed: int = 0) -> torch.Tensor:
-    g = torch.Generator().manual_seed(seed)
-    return (torch.rand(*shape, generator=g, dtype=DOUBLE) * (high - low) + low).requires_grad_()
-
-
-def _unit_field(b: int, h: int, w: int, seed: int = 1) -> torch.Tensor:
-    g = torch.Generator().manual_seed(seed)
-    angle = torch.rand(b, 1, h, w, generator=g, dtype=DOUBLE) * 2 * math.pi
-    return torch.cat((angle.cos(), angle.sin()), dim=1).requires_grad_()
-
-
-def _unit(v: torch.Tensor) -> torch.Tensor:
-    return v / torch.sqrt(v[:, 0:1] ** 2 + v[:, 1:2] ** 2)
 
 
 def _check(fn, *inputs: torch.Tensor) -> None:
@@ -31,24 +13,24 @@ def _check(fn, *inputs: torch.Tensor) -> None:
 
 
 def test_adjust_color() -> None:
-    image = _rand(2, 3, 5, 6, low=0.1, high=0.8)
-    brightness = _rand(2, low=-0.05, high=0.05, seed=2)
-    contrast = _rand(2, 1, 5, 6, low=0.8, high=1.2, seed=3)
-    saturation = _rand(2, low=0.5, high=0.9, seed=4)
-    gamma = _rand(2, low=0.8, high=1.2, seed=5)
-    exposure = _rand(2, low=0.9, high=1.1, seed=6)
-    hue = _rand(2, low=0.05, high=0.1, seed=7)
+    image = rand(2, 3, 5, 6, low=0.1, high=0.8)
+    brightness = rand(2, low=-0.05, high=0.05, seed=2)
+    contrast = rand(2, 1, 5, 6, low=0.8, high=1.2, seed=3)
+    saturation = rand(2, low=0.5, high=0.9, seed=4)
+    gamma = rand(2, low=0.8, high=1.2, seed=5)
+    exposure = rand(2, low=0.9, high=1.1, seed=6)
+    hue = rand(2, low=0.05, high=0.1, seed=7)
     _check(lambda *a: W.adjust_color(*a), image, brightness, contrast, saturation, gamma, exposure, hue)
 
 
 def test_lab_round_trip_gradients() -> None:
-    _check(W.rgb_to_lab, _rand(1, 3, 4, 5, low=0.05, high=0.95))
-    lab = W.rgb_to_lab(_rand(1, 3, 4, 5, low=0.2, high=0.8).detach()).requires_grad_()
+    _check(W.rgb_to_lab, rand(1, 3, 4, 5, low=0.05, high=0.95))
+    lab = W.rgb_to_lab(rand(1, 3, 4, 5, low=0.2, high=0.8).detach()).requires_grad_()
     _check(W.lab_to_rgb, lab)
 
 
 def test_hsv_gradients() -> None:
-    _check(W.rgb_to_hsv, _rand(1, 3, 4, 5, low=0.1, high=0.9))
+    _check(W.rgb_to_hsv, rand(1, 3, 4, 5, low=0.1, high=0.9))
     hsv = torch.stack(
         [torch.rand(1, 4, 5) * 0.9 + 0.02, torch.rand(1, 4, 5) * 0.6 + 0.2, torch.rand(1, 4, 5) * 0.6 + 0.3], 1
     )
@@ -57,54 +39,54 @@ def test_hsv_gradients() -> None:
 
 @pytest.mark.parametrize("per_pixel", [False, True])
 def test_gaussian_blur(per_pixel: bool) -> None:
-    image = _rand(2, 2, 7, 8)
-    sigma = _rand(2, 1, 7, 8, low=0.6, high=1.4, seed=3) if per_pixel else _rand(2, low=0.6, high=1.4, seed=3)
+    image = rand(2, 2, 7, 8)
+    sigma = rand(2, 1, 7, 8, low=0.6, high=1.4, seed=3) if per_pixel else rand(2, low=0.6, high=1.4, seed=3)
     _check(lambda i, s: W.gaussian_blur(i, s, scale=1.0), image, sigma)
 
 
 def test_structure_tensor() -> None:
-    image = _rand(2, 1, 7, 8)
-    sigma = _rand(2, 1, 7, 8, low=0.55, high=0.9, seed=4)
+    image = rand(2, 1, 7, 8)
+    sigma = rand(2, 1, 7, 8, low=0.55, high=0.9, seed=4)
     _check(lambda i, s: W.structure_tensor(i, s, scale=1.0), image, sigma)
 
 
 def test_edge_tangent_flow() -> None:
-    tensor = _rand(1, 3, 5, 6, low=0.1, high=2.0)
+    tensor = rand(1, 3, 5, 6, low=0.1, high=2.0)
     _check(W.edge_tangent_flow, tensor)
 
 
 def test_bilateral_pass() -> None:
-    image = _rand(2, 3, 7, 8, high=20.0)
-    direction = _unit_field(2, 7, 8)
-    sigma_d = _rand(2, low=1.9, high=2.6, seed=5)
-    sigma_r = _rand(2, 1, 7, 8, low=5.0, high=15.0, seed=6)
-    _check(lambda i, d, a, b: W.bilateral_pass(i, _unit(d), a, b, 3, 1.0), image, direction, sigma_d, sigma_r)
+    image = rand(2, 3, 7, 8, high=20.0)
+    direction = unit_field(2, 7, 8)
+    sigma_d = rand(2, low=1.9, high=2.6, seed=5)
+    sigma_r = rand(2, 1, 7, 8, low=5.0, high=15.0, seed=6)
+    _check(lambda i, d, a, b: W.bilateral_pass(i, unit(d), a, b, 3, 1.0), image, direction, sigma_d, sigma_r)
 
 
 def test_oriented_bilateral() -> None:
-    image = _rand(1, 3, 6, 7, high=20.0)
-    tangent = _unit_field(1, 6, 7, seed=8)
-    sigma_d = _rand(1, 1, 6, 7, low=1.1, high=1.4, seed=9)
-    _check(lambda i, t, a: W.oriented_bilateral(i, _unit(t), a, 12.0, 2, 1.0), image, tangent, sigma_d)
+    image = rand(1, 3, 6, 7, high=20.0)
+    tangent = unit_field(1, 6, 7, seed=8)
+    sigma_d = rand(1, 1, 6, 7, low=1.1, high=1.4, seed=9)
+    _check(lambda i, t, a: W.oriented_bilateral(i, unit(t), a, 12.0, 2, 1.0), image, tangent, sigma_d)
 
 
 def test_flow_dog() -> None:
-    image = _rand(2, 1, 7, 8)
-    tangent = _unit_field(2, 7, 8, seed=3)
-    sigma = _rand(2, 1, 7, 8, low=0.8, high=1.1, seed=4)
-    sharpen = _rand(2, low=1.0, high=5.0, seed=5)
-    _check(lambda i, t, s, p: W.flow_dog(i, _unit(t), s, p, 10, 1.0), image, tangent, sigma, sharpen)
+    image = rand(2, 1, 7, 8)
+    tangent = unit_field(2, 7, 8, seed=3)
+    sigma = rand(2, 1, 7, 8, low=0.8, high=1.1, seed=4)
+    sharpen = rand(2, low=1.0, high=5.0, seed=5)
+    _check(lambda i, t, s, p: W.flow_dog(i, unit(t), s, p, 10, 1.0), image, tangent, sigma, sharpen)
 
 
 def test_flow_smoothing() -> None:
-    image = _rand(2, 2, 7, 8)
-    tangent = _unit_field(2, 7, 8, seed=6).detach()
-    sigma = _rand(2, 1, 7, 8, low=1.1, high=1.4, seed=7)
+    image = rand(2, 2, 7, 8)
+    tangent = unit_field(2, 7, 8, seed=6).detach()
+    sigma = rand(2, 1, 7, 8, low=1.1, high=1.4, seed=7)
     _check(lambda i, s: W.flow_smoothing(i, tangent, s, scale=1.0), image, sigma)
 
 
 def test_xdog_threshold() -> None:
-    response = _rand(1, 1, 5, 6)
-    epsilon = _rand(1, 1, 5, 6, low=0.3, high=0.7, seed=3)
-    sharpness = _rand(1, low=2.0, high=4.0, seed=4)
+    response = rand(1, 1, 5, 6)
+    epsilon = rand(1, 1, 5, 6, low=0.3, high=0.7, seed=3)
+    sharpness = rand(1, low=2.0, high=4.0, seed=4)
     _check(W.xdog_threshold, response, epsilon, sharpness)

@@ -1,30 +1,12 @@
 """Watercolor filters: gradients against finite differences and behaviour on known images."""
 
-import math
-
 import pytest
 import torch
 from torch.autograd import gradcheck
 
+from tests.filters.helpers import rand, unit, unit_field
 from wise.errors import WiseError
 from wise.filters.watercolor import edge_darkening, gaps_overlaps, pigment_density, wet_in_wet, wobble
-
-DOUBLE = torch.float64
-
-
-def _rand(*shape: int, low: float = 0.0, high: float = 1.0, seed: int = 0) -> torch.Tensor:
-    g = torch.Generator().manual_seed(seed)
-    return (torch.rand(*shape, generator=g, dtype=DOUBLE) * (high - low) + low).requires_grad_()
-
-
-def _unit_field(b: int, h: int, w: int, seed: int = 1) -> torch.Tensor:
-    g = torch.Generator().manual_seed(seed)
-    angle = torch.rand(b, 1, h, w, generator=g, dtype=DOUBLE) * 2 * math.pi
-    return torch.cat((angle.cos(), angle.sin()), dim=1).requires_grad_()
-
-
-def _unit(v: torch.Tensor) -> torch.Tensor:
-    return v / torch.sqrt(v[:, 0:1] * v[:, 0:1] + v[:, 1:2] * v[:, 1:2])
 
 
 @pytest.fixture(autouse=True, scope="module")
@@ -55,34 +37,34 @@ def _step(h: int = 16, w: int = 40, at: int = 20, left: float = 0.8, right: floa
 
 
 def test_pigment_density_gradients() -> None:
-    image = _rand(2, 3, 5, 6, low=0.1, high=0.9)
-    _check(pigment_density, image, _rand(2, 1, 5, 6, low=0.5, high=1.5, seed=2))
-    _check(pigment_density, image, _rand(2, low=0.5, high=1.5, seed=3))
+    image = rand(2, 3, 5, 6, low=0.1, high=0.9)
+    _check(pigment_density, image, rand(2, 1, 5, 6, low=0.5, high=1.5, seed=2))
+    _check(pigment_density, image, rand(2, low=0.5, high=1.5, seed=3))
 
 
 def test_edge_darkening_gradients() -> None:
-    image = _rand(2, 3, 7, 8, low=0.1, high=0.9)
-    amount = _rand(2, low=0.5, high=2.0, seed=2)
-    sigma = _rand(2, 1, 7, 8, low=0.7, high=1.2, seed=3)
+    image = rand(2, 3, 7, 8, low=0.1, high=0.9)
+    amount = rand(2, low=0.5, high=2.0, seed=2)
+    sigma = rand(2, 1, 7, 8, low=0.7, high=1.2, seed=3)
     _check(lambda i, a, s: edge_darkening(i, a, s, scale=1.0), image, amount, sigma)
 
 
 def test_wobble_gradients() -> None:
-    image = _rand(2, 3, 7, 8)
-    texture = _rand(2, 1, 7, 8, seed=2)
-    amount = _rand(2, 1, 7, 8, low=0.5, high=1.5, seed=3)
+    image = rand(2, 3, 7, 8)
+    texture = rand(2, 1, 7, 8, seed=2)
+    amount = rand(2, 1, 7, 8, low=0.5, high=1.5, seed=3)
     _check(lambda i, t, a: wobble(i, t, a, scale=1.0), image, texture, amount)
 
 
 @pytest.mark.parametrize("low, high", [(0.2, 0.9), (-0.9, -0.2)])
 def test_gaps_overlaps_gradients(low: float, high: float) -> None:
-    image = _rand(2, 3, 7, 8, low=0.1, high=0.9)
-    edges = _rand(2, 1, 7, 8, seed=2)
-    direction = _unit_field(2, 7, 8, seed=3)
-    amount = _rand(2, low=low, high=high, seed=4)
-    noise = _rand(2, 1, 7, 8, seed=5)
+    image = rand(2, 3, 7, 8, low=0.1, high=0.9)
+    edges = rand(2, 1, 7, 8, seed=2)
+    direction = unit_field(2, 7, 8, seed=3)
+    amount = rand(2, low=low, high=high, seed=4)
+    noise = rand(2, 1, 7, 8, seed=5)
     _check(
-        lambda i, e, d, a, n: gaps_overlaps(i, e, _unit(d), a, n, scale=1.3),
+        lambda i, e, d, a, n: gaps_overlaps(i, e, unit(d), a, n, scale=1.3),
         image,
         edges,
         direction,
@@ -92,13 +74,13 @@ def test_gaps_overlaps_gradients(low: float, high: float) -> None:
 
 
 def test_wet_in_wet_gradients() -> None:
-    image = _rand(2, 3, 7, 8)
-    direction = _unit_field(2, 7, 8, seed=2)
-    edges = _rand(2, 1, 7, 8, seed=3)
-    amount = _rand(2, low=1.5, high=2.5, seed=4)
-    noise = _rand(2, 1, 7, 8, seed=5)
+    image = rand(2, 3, 7, 8)
+    direction = unit_field(2, 7, 8, seed=2)
+    edges = rand(2, 1, 7, 8, seed=3)
+    amount = rand(2, low=1.5, high=2.5, seed=4)
+    noise = rand(2, 1, 7, 8, seed=5)
     _check(
-        lambda i, d, e, a, n: wet_in_wet(i, _unit(d), e, a, n, scale=1.0, samples=3),
+        lambda i, d, e, a, n: wet_in_wet(i, unit(d), e, a, n, scale=1.0, samples=3),
         image,
         direction,
         edges,

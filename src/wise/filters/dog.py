@@ -2,12 +2,10 @@
 
 from __future__ import annotations
 
-import math
-
 import torch
 
 from wise.filters._checks import ParamLike, as_map, check_image, max_value, resolution_scale
-from wise.filters.flow import check_direction, pixel_step, trace_streamlines
+from wise.filters.flow import check_direction, pixel_step, spaced_samples, trace_streamlines
 from wise.filters.gaussian import MIN_SIGMA, SUPPORT, in_support
 from wise.filters.sampling import offset_grid, sample, sample_at_grid, sample_backward, sum_to, tap_sum
 from wise.filters.structure import gradient_direction
@@ -123,9 +121,7 @@ def flow_dog(
     s = resolution_scale(image) if scale is None else scale
     narrow = (as_map(sigma, image, "sigma") * s).clamp_min(MIN_SIGMA)
     wide = narrow * WIDE_TO_NARROW
-    reach = SUPPORT * max_value(wide)
-    spacing = max(1.0, reach / max_steps)
-    steps = max(1, min(max_steps, math.floor(reach / spacing)))
+    spacing, steps = spaced_samples(SUPPORT * max_value(wide), max_steps)
     direction = gradient_direction(tangent)
     step = pixel_step(direction) * spacing
 
@@ -172,9 +168,7 @@ def flow_smoothing(
     check_direction(tangent, image, "tangent")
     s = resolution_scale(image) if scale is None else scale
     sigma_px = (as_map(sigma, image, "sigma") * s).clamp_min(MIN_SIGMA)
-    reach = SUPPORT * max_value(sigma_px)
-    step_length = max(1.0, s, reach / max_steps)
-    steps = max(1, min(max_steps, math.floor(reach / step_length)))
+    step_length, steps = spaced_samples(SUPPORT * max_value(sigma_px), max_steps, max(1.0, s))
     grids = trace_streamlines(tangent.detach(), steps, step_length)
 
     neg_inv_two_sigma_sq = -0.5 / sigma_px.square()

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import torch
 
 from wise.filters._checks import check_image
@@ -41,6 +43,14 @@ class _PixelStep(torch.autograd.Function):
         g_major = -grad / major.abs().clamp_min(1e-6).square() * torch.sign(major)
         zero = torch.zeros_like(g_major)
         return torch.cat((torch.where(x_major, g_major, zero), torch.where(x_major, zero, g_major)), dim=1)
+
+
+def spaced_samples(reach: float, max_samples: int, min_spacing: float = 1.0) -> tuple[float, int]:
+    """Spacing (pixels) and count of the samples on one side that cover ``reach`` pixels with
+    at most ``max_samples``: every ``min_spacing`` pixels while that suffices, sparser beyond,
+    so the cost of a kernel does not grow with its size."""
+    spacing = max(min_spacing, reach / max_samples)
+    return spacing, max(1, min(max_samples, math.floor(reach / spacing)))
 
 
 @torch.no_grad()

@@ -2,12 +2,10 @@
 
 from __future__ import annotations
 
-import math
-
 import torch
 
 from wise.filters._checks import ParamLike, as_map, check_image, max_value, resolution_scale
-from wise.filters.flow import check_direction, pixel_step
+from wise.filters.flow import check_direction, pixel_step, spaced_samples
 from wise.filters.sampling import sample, tap_sum
 from wise.filters.structure import gradient_direction
 
@@ -79,9 +77,7 @@ def flow_log(
     check_direction(tangent, image, "tangent")
     s = resolution_scale(image) if scale is None else scale
     sigma_px = (as_map(sigma, image, "sigma") * s).clamp_min(MIN_SIGMA)
-    reach = EXTENT * max_value(sigma_px)
-    spacing = max(1.0, reach / max_steps)
-    steps = max(1, min(max_steps, math.floor(reach / spacing)))
+    spacing, steps = spaced_samples(EXTENT * max_value(sigma_px), max_steps)
     direction = gradient_direction(tangent).expand(image.shape[0], -1, -1, -1)
     step = pixel_step(direction) * spacing
 
