@@ -23,6 +23,8 @@ from wise.effects.base import Effect
 from wise.errors import WiseError
 from wise.gallery import make_sheet
 from wise.io import WRITE_FORMATS, image_to_tensor, read_image, write_image
+from wise.optimize.parametric import LOSSES, MODES, Settings
+from wise.optimize.run import run as run_optimization
 from wise.paramfile import load_params
 from wise.render import render
 
@@ -84,6 +86,22 @@ def build_parser() -> argparse.ArgumentParser:
     gallery.add_argument("--effects", nargs="+", metavar="EFFECT", help="only these effects")
     gallery.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto", help="default: cuda if available")
     gallery.set_defaults(func=_cmd_gallery)
+
+    opt = commands.add_parser("optimize", help="optimize parameters so that an effect re-creates a target image")
+    opt.add_argument("effect", metavar="EFFECT", help="effect name (see 'wise effects')")
+    opt.add_argument("--content", required=True, metavar="IMAGE", help="the photo to stylize")
+    opt.add_argument("--target", required=True, metavar="IMAGE", help="the stylized reference to re-create")
+    opt.add_argument("-o", "--output", required=True, metavar="OUTDIR", help="folder for the results")
+    opt.add_argument("--mode", choices=MODES, default="local", help="per-pixel masks (default) or global values")
+    opt.add_argument("--iters", type=int, default=Settings.iterations, metavar="N", help="iterations")
+    opt.add_argument("--lr", type=float, default=Settings.lr, help="Adam learning rate (default 0.1)")
+    opt.add_argument("--loss", choices=LOSSES, default="l1", help="image loss (default l1)")
+    opt.add_argument("--tv", type=float, default=0.0, metavar="W", help="total-variation weight on the masks")
+    opt.add_argument("--size", type=int, default=512, metavar="PX", help="short side of the working resolution")
+    opt.add_argument("--init", metavar="PRESET|FILE", help="start from a preset or a params file (resume)")
+    opt.add_argument("--seed", type=int, default=0, help="seed of the effect's textures and of torch")
+    opt.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto", help="default: cuda if available")
+    opt.set_defaults(func=_cmd_optimize)
     return parser
 
 
@@ -208,6 +226,25 @@ def _cmd_gallery(args: argparse.Namespace, out: TextIO) -> int:
     sheet = make_sheet(image, args.size, names, device, progress=report)
     write_image(image_to_tensor(np.asarray(sheet)), output)
     print(f"wrote {output}", file=out)
+    return 0
+
+
+def _cmd_optimize(args: argparse.Namespace, out: TextIO) -> int:
+    if args.size < 16:
+        raise WiseError(f"--size must be at least 16 pixels, got {args.size}")
+    settings = Settings(mode=args.mode, iterations=args.iters, lr=args.lr, loss=args.loss, tv_weight=args.tv)
+    run_optimization(
+        args.effect,
+        args.content,
+        args.target,
+        args.output,
+        settings,
+        size=args.size,
+        init=args.init,
+        seed=args.seed,
+        device=_device(args.device),
+        out=out,
+    )
     return 0
 
 

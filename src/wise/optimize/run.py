@@ -1,0 +1,138 @@
+"""One parametric style transfer run from files to an output folder (``wise optimize``)."""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+from typing import TextIO
+
+import torch
+import torch.nn.functional as F
+
+from wise import effects, metrics
+from wise.effects.base import Effect
+from wise.errors import WiseError
+from wise.io import atomic_path, read_image, tensor_to_image, write_image
+from wise.optimize.parametric import Outcome, Settings, optimize
+from wise.optimize.report import write_animation, write_report
+from wise.paramfile import load_params, save_params
+from wise.render import render
+
+ASPECT_TOLERANCE = 0.01
+"""Relative aspect-ratio difference up to which a target is resized to the content."""
+ANIMATION_FRAMES = 40
+PROGRESS_EVERY = 10
+
+
+def create_effect(name: str, seed: int) -> Effect:
+    """The effect, seeded where it draws procedural textures."""
+    effect = effects.create(name)
+    if hasattr(effect, "seed"):
+        effect.seed = seed
+    return effect
+
+
+def working_size(height: int, width: int, short_side: int) -> tuple[int, int]:
+    factor = min(1.0, short_side / min(height, width))
+    return max(8, round(height * factor)), max(8, round(width * factor))
+
+
+def match_target(target: torch.Tensor, size: tuple[int, int], out: TextIO) -> torch.Tensor:
+    """The target at the working size; refuses a different aspect ratio."""
+    height, width = target.shape[-2:]
+    if abs((width / height) / (size[1] / size[0]) - 1.0) > ASPECT_TOLERANCE:
+        raise WiseError(
+            f"the target is {width}x{height} but the content's aspect ratio is {size[1]}:{size[0]}; "
+            "crop the target to the content's aspect ratio"
+        )
+    if (height, width) != size:
+        print(f"resizing the target from {width}x{height} to {size[1]}x{size[0]}", file=out)
+        target = F.interpolate(target, size=size, mode="area" if height > size[0] else "bilinear", align_corners=None)
+    return target.clamp(0.0, 1.0)
+
+
+def initial_params(effect: Effect, init: str | None) -> torch.Tensor:
+    """A preset name or a parameter file (resume); the defaults without ``init``."""
+    if init is None:
+        return effect.default_params()
+    if init.endswith(".safetensors") or Path(init).is_file():
+        return load_params(init, effect)
+    return effect.preset(init)
+
+
+def run(
+    effect_name: str,
+    content_path: str,
+    target_path: str,
+    out_dir: str,
+    settings: Settings,
+    size: int = 512,
+    init: str | None = None,
+    seed: int = 0,
+    device: torch.device | str = "cpu",
+    out: TextIO = sys.stdout,
+) -> Outcome:
+    """Optimize ``effect_name`` to re-create the target and write result.png, params.safetensors,
+    metrics.json, report.html and optimization.gif into ``out_dir``."""
+    torch.manual_seed(seed)
+    effect = create_effect(effect_name, seed).to(device)
+    start_params = initial_params(effect, init)
+    folder = Path(out_dir)
+    if folder.exists() and not folder.is_dir():
+        raise WiseError(f"{folder}: exists and is not a directory")
+    content_full = read_image(content_path)
+    target_full = read_image(target_path)
+    size_hw = working_size(*content_full.shape[-2:], size)
+    content = F.interpolate(content_full, size=size_hw, mode="area").to(device)
+    target = match_target(target_full, size_hw, out).to(device)
+    folder.mkdir(parents=True, exist_ok=True)
+
+    frames, every = [], max(1, settings.iterations // ANIMATION_FRAMES)
+
+    def on_step(iteration: int, loss: float, output: torch.Tensor) -> None:
+        if iteration % every == 0 or iteration == 1:
+            frames.append(tensor_to_image(output.cpu()))
+        if iteration % PROGRESS_EVERY == 0 or iteration == settings.iterations:
+            print(f"iteration {iteration}/{settings.iterations}  loss {loss:.5f}", file=out, flush=True)
+
+    outcome = optimize(effect, content, target, start_params.to(device), settings, on_step)
+    if outcome.interrupted:
+        print(f"interrupted after {len(outcome.losses)} iterations; writing the state reached", file=out)
+    assert outcome.result is not None
+    scores = {
+        "effect": effect_name,
+        "mode": settings.mode,
+        "iterations": len(outcome.losses),
+        "seconds": round(outcome.seconds, 3),
+        "l1": metrics.l1(outcome.result, target),
+        "psnr": metrics.psnr(outcome.result, target),
+        "ssim": metrics.ssim(outcome.result, target),
+        "loss": outcome.losses[-1] if outcome.losses else math.nan,
+        "interrupted": outcome.interrupted,
+        "working_size": [size_hw[1], size_hw[0]],
+    }
+    params = outcome.params.cpu()
+    save_params(folder / "params.safetensors", effect, params)
+    write_image(render(effect.cpu(), content_full, params), folder / "result.png")
+    with atomic_path(folder / "metrics.json") as path:
+        Path(path).write_text(json.dumps(scores, indent=2) + "\n")
+    write_report(
+        folder / "report.html",
+        effect,
+        content.cpu(),
+        target.cpu(),
+        outcome.result.cpu(),
+        params,
+        outcome.losses,
+        scores,
+    )
+    if frames:
+        write_animation(folder / "optimization.gif", frames)
+    print(
+        f"l1 {scores['l1']:.4f}  psnr {scores['psnr']:.2f} dB  ssim {scores['ssim']:.4f}  "
+        f"in {outcome.seconds:.1f} s; report: {folder / 'report.html'}",
+        file=out,
+    )
+    return outcome

@@ -1,0 +1,89 @@
+import json
+from pathlib import Path
+
+import pytest
+import torch
+import torch.nn.functional as F
+
+import wise
+from wise.cli import main
+from wise.io import read_image, write_image
+
+
+@pytest.fixture(scope="module")
+def images(tmp_path_factory: pytest.TempPathFactory, astronaut: torch.Tensor) -> tuple[Path, Path]:
+    folder = tmp_path_factory.mktemp("optimize")
+    content = F.interpolate(astronaut, size=(48, 64), mode="area")
+    effect = wise.effects.create("cartoon")
+    with torch.no_grad():
+        target = effect(content, effect.preset("bold")[None])
+    write_image(content, folder / "content.png")
+    write_image(target, folder / "target.png")
+    return folder / "content.png", folder / "target.png"
+
+
+def optimize_args(images: tuple[Path, Path], out: Path, *extra: str) -> list[str]:
+    content, target = images
+    return ["optimize", "cartoon", "--content", str(content), "--target", str(target), "-o", str(out), *extra]
+
+
+def test_optimize_writes_every_output_and_apply_reproduces_the_result(images, tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    assert main(optimize_args(images, out, "--iters", "6", "--size", "48")) == 0
+    assert {p.name for p in out.iterdir()} >= {
+        "result.png",
+        "params.safetensors",
+        "metrics.json",
+        "report.html",
+        "optimization.gif",
+    }
+    scores = json.loads((out / "metrics.json").read_text())
+    assert {"l1", "psnr", "ssim", "seconds", "iterations", "effect", "mode"} <= set(scores)
+    assert scores["iterations"] == 6 and scores["effect"] == "cartoon" and scores["mode"] == "local"
+    again = tmp_path / "again.png"
+    content = images[0]
+    assert main(["apply", "cartoon", str(content), "--params", str(out / "params.safetensors"), "-o", str(again)]) == 0
+    assert torch.equal(read_image(again), read_image(out / "result.png"))
+
+
+def test_an_interrupted_run_writes_a_state_that_resumes(images, tmp_path: Path, monkeypatch) -> None:
+    import wise.optimize.run as run_module
+
+    calls = {"n": 0}
+    real = run_module.tensor_to_image
+
+    def interrupt_on_third_frame(tensor: torch.Tensor):
+        calls["n"] += 1
+        if calls["n"] == 3:
+            raise KeyboardInterrupt
+        return real(tensor)
+
+    monkeypatch.setattr(run_module, "tensor_to_image", interrupt_on_third_frame)
+    first = tmp_path / "first"
+    assert main(optimize_args(images, first, "--iters", "40", "--size", "48")) == 0
+    scores = json.loads((first / "metrics.json").read_text())
+    assert scores["interrupted"] is True and scores["iterations"] < 40
+    monkeypatch.setattr(run_module, "tensor_to_image", real)
+    second = tmp_path / "second"
+    resume = ["--iters", "3", "--size", "48", "--init", str(first / "params.safetensors")]
+    assert main(optimize_args(images, second, *resume)) == 0
+    assert json.loads((second / "metrics.json").read_text())["iterations"] == 3
+
+
+def test_a_target_of_another_aspect_is_refused(images, tmp_path: Path, capsys) -> None:
+    other = tmp_path / "square.png"
+    write_image(torch.rand(1, 3, 40, 40), other)
+    out = tmp_path / "refused"
+    args = ["optimize", "cartoon", "--content", str(images[0]), "--target", str(other), "-o", str(out), "--iters", "2"]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "aspect ratio" in err[0]
+    assert not out.exists()
+
+
+def test_a_target_of_another_size_is_resized(images, tmp_path: Path, capsys) -> None:
+    bigger = tmp_path / "bigger.png"
+    write_image(F.interpolate(read_image(images[1]), size=(96, 128), mode="bilinear"), bigger)
+    args = ["optimize", "cartoon", "--content", str(images[0]), "--target", str(bigger), "-o", str(tmp_path / "o")]
+    assert main([*args, "--iters", "2", "--size", "48"]) == 0
+    assert "resizing the target" in capsys.readouterr().out
