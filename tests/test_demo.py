@@ -21,3 +21,11 @@ def test_demo_writes_both_presets_and_their_params(tmp_path) -> None:
     args = ["apply", "xdog", str(tmp_path / "astronaut.png"), "--params", str(tmp_path / "xdog_sketch.safetensors")]
     assert wise_main(args + ["-o", str(rerendered)]) == 0
     assert torch.equal(read_image(rerendered), read_image(tmp_path / "xdog_sketch.png"))
+
+
+def test_demo_transfer_writes_a_report(tmp_path, monkeypatch) -> None:
+    demo.run(tmp_path)
+    monkeypatch.setattr(demo, "DEMO_ITERATIONS", 2)
+    monkeypatch.setattr(demo, "DEMO_SIZE", 32)
+    report = demo.transfer_demo(tmp_path)
+    assert report.exists() and "watercolor" in report.read_text()

@@ -25,6 +25,7 @@ from wise.gallery import make_sheet
 from wise.io import WRITE_FORMATS, image_to_tensor, read_image, write_image
 from wise.optimize.parametric import LOSSES, MODES, Settings
 from wise.optimize.run import run as run_optimization
+from wise.optimize.run import transfer as run_transfer
 from wise.paramfile import load_params
 from wise.render import render
 
@@ -91,18 +92,31 @@ def build_parser() -> argparse.ArgumentParser:
     opt.add_argument("effect", metavar="EFFECT", help="effect name (see 'wise effects')")
     opt.add_argument("--content", required=True, metavar="IMAGE", help="the photo to stylize")
     opt.add_argument("--target", required=True, metavar="IMAGE", help="the stylized reference to re-create")
-    opt.add_argument("-o", "--output", required=True, metavar="OUTDIR", help="folder for the results")
-    opt.add_argument("--mode", choices=MODES, default="local", help="per-pixel masks (default) or global values")
-    opt.add_argument("--iters", type=int, default=Settings.iterations, metavar="N", help="iterations")
-    opt.add_argument("--lr", type=float, default=Settings.lr, help="Adam learning rate (default 0.1)")
-    opt.add_argument("--loss", choices=LOSSES, default="l1", help="image loss (default l1)")
-    opt.add_argument("--tv", type=float, default=0.0, metavar="W", help="total-variation weight on the masks")
-    opt.add_argument("--size", type=int, default=512, metavar="PX", help="short side of the working resolution")
-    opt.add_argument("--init", metavar="PRESET|FILE", help="start from a preset or a params file (resume)")
-    opt.add_argument("--seed", type=int, default=0, help="seed of the effect's textures and of torch")
-    opt.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto", help="default: cuda if available")
+    _add_optimization_options(opt)
     opt.set_defaults(func=_cmd_optimize)
+
+    transfer = commands.add_parser("transfer", help="neural style transfer, then re-create it with an effect")
+    transfer.add_argument("effect", metavar="EFFECT", help="effect name (see 'wise effects')")
+    transfer.add_argument("--content", required=True, metavar="IMAGE", help="the photo to stylize")
+    style = transfer.add_mutually_exclusive_group(required=True)
+    style.add_argument("--style", metavar="IMAGE", help="a style image (any painting or drawing)")
+    style.add_argument("--builtin-style", type=int, metavar="K", help="one of the built-in styles, 0 to 25")
+    _add_optimization_options(transfer)
+    transfer.set_defaults(func=_cmd_transfer)
     return parser
+
+
+def _add_optimization_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("-o", "--output", required=True, metavar="OUTDIR", help="folder for the results")
+    parser.add_argument("--mode", choices=MODES, default="local", help="per-pixel masks (default) or global values")
+    parser.add_argument("--iters", type=int, default=Settings.iterations, metavar="N", help="iterations")
+    parser.add_argument("--lr", type=float, default=Settings.lr, help="Adam learning rate (default 0.1)")
+    parser.add_argument("--loss", choices=LOSSES, default="l1", help="image loss (default l1)")
+    parser.add_argument("--tv", type=float, default=0.0, metavar="W", help="total-variation weight on the masks")
+    parser.add_argument("--size", type=int, default=512, metavar="PX", help="short side of the working resolution")
+    parser.add_argument("--init", metavar="PRESET|FILE", help="start from a preset or a params file (resume)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the effect's textures and of torch")
+    parser.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto", help="default: cuda if available")
 
 
 def _effect_table(effect: Effect) -> list[str]:
@@ -229,21 +243,30 @@ def _cmd_gallery(args: argparse.Namespace, out: TextIO) -> int:
     return 0
 
 
-def _cmd_optimize(args: argparse.Namespace, out: TextIO) -> int:
+def _optimization(args: argparse.Namespace, out: TextIO) -> tuple[Settings, dict[str, object]]:
     if args.size < 16:
         raise WiseError(f"--size must be at least 16 pixels, got {args.size}")
     settings = Settings(mode=args.mode, iterations=args.iters, lr=args.lr, loss=args.loss, tv_weight=args.tv)
-    run_optimization(
+    options = {"size": args.size, "init": args.init, "seed": args.seed, "device": _device(args.device), "out": out}
+    return settings, options
+
+
+def _cmd_optimize(args: argparse.Namespace, out: TextIO) -> int:
+    settings, options = _optimization(args, out)
+    run_optimization(args.effect, args.content, args.target, args.output, settings, **options)
+    return 0
+
+
+def _cmd_transfer(args: argparse.Namespace, out: TextIO) -> int:
+    settings, options = _optimization(args, out)
+    run_transfer(
         args.effect,
         args.content,
-        args.target,
         args.output,
         settings,
-        size=args.size,
-        init=args.init,
-        seed=args.seed,
-        device=_device(args.device),
-        out=out,
+        builtin_style=args.builtin_style,
+        style_path=args.style,
+        **options,
     )
     return 0
 

@@ -87,3 +87,11 @@ def test_a_target_of_another_size_is_resized(images, tmp_path: Path, capsys) -> 
     args = ["optimize", "cartoon", "--content", str(images[0]), "--target", str(bigger), "-o", str(tmp_path / "o")]
     assert main([*args, "--iters", "2", "--size", "48"]) == 0
     assert "resizing the target" in capsys.readouterr().out
+
+
+def test_transfer_makes_the_reference_then_optimizes(images, tmp_path: Path) -> None:
+    out = tmp_path / "transfer"
+    args = ["transfer", "watercolor", "--content", str(images[0]), "--builtin-style", "7", "-o", str(out)]
+    assert main([*args, "--iters", "2", "--size", "32"]) == 0
+    assert (out / "target.png").exists() and (out / "report.html").exists()
+    assert read_image(out / "target.png").shape == read_image(images[0]).shape

