@@ -23,6 +23,7 @@ from wise.effects.base import Effect
 from wise.errors import WiseError
 from wise.gallery import make_sheet
 from wise.io import WRITE_FORMATS, image_to_tensor, read_image, write_image
+from wise.optimize.benchmark import recover as recover_parameters
 from wise.optimize.parametric import LOSSES, MODES, Settings
 from wise.optimize.run import run as run_optimization
 from wise.optimize.run import transfer as run_transfer
@@ -103,6 +104,19 @@ def build_parser() -> argparse.ArgumentParser:
     style.add_argument("--builtin-style", type=int, metavar="K", help="one of the built-in styles, 0 to 25")
     _add_optimization_options(transfer)
     transfer.set_defaults(func=_cmd_transfer)
+
+    bench = commands.add_parser("bench", help="benchmarks")
+    benches = bench.add_subparsers(dest="bench", metavar="BENCHMARK", required=True)
+    recover = benches.add_parser("recover", help="recover random global parameters by optimization")
+    recover.add_argument("effect", metavar="EFFECT", help="effect name (see 'wise effects')")
+    recover.add_argument("--images", required=True, metavar="DIR", help="folder of photos")
+    recover.add_argument("--trials", type=int, default=10, metavar="N", help="number of trials (default 10)")
+    recover.add_argument("--size", type=int, default=512, metavar="PX", help="short side of the photos (default 512)")
+    recover.add_argument("--seed", type=int, default=0, help="seed of the random parameters")
+    recover.add_argument("--iters", type=int, default=300, metavar="N", help="iterations per trial")
+    recover.add_argument("--loss", choices=LOSSES, default="l2", help="image loss (default l2)")
+    recover.add_argument("--json", required=True, metavar="OUT", help="write the results here")
+    recover.set_defaults(func=_cmd_bench_recover)
     return parser
 
 
@@ -267,6 +281,25 @@ def _cmd_transfer(args: argparse.Namespace, out: TextIO) -> int:
         builtin_style=args.builtin_style,
         style_path=args.style,
         **options,
+    )
+    return 0
+
+
+def _cmd_bench_recover(args: argparse.Namespace, out: TextIO) -> int:
+    if args.size < 16:
+        raise WiseError(f"--size must be at least 16 pixels, got {args.size}")
+    if Path(args.json).parent and not Path(args.json).parent.is_dir():
+        raise WiseError(f"{args.json}: the directory {Path(args.json).parent} does not exist")
+    recover_parameters(
+        args.effect,
+        args.images,
+        args.trials,
+        args.size,
+        args.seed,
+        args.iters,
+        loss=args.loss,
+        json_path=args.json,
+        out=out,
     )
     return 0
 
