@@ -125,7 +125,8 @@ def _add_optimization_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mode", choices=MODES, default="local", help="per-pixel masks (default) or global values")
     parser.add_argument("--iters", type=int, default=Settings.iterations, metavar="N", help="iterations")
     parser.add_argument("--lr", type=float, default=Settings.lr, help="Adam learning rate (default 0.1)")
-    parser.add_argument("--loss", choices=LOSSES, default="l1", help="image loss (default l1)")
+    parser.add_argument("--loss", choices=LOSSES, default="l1", help="image loss (default l1); nst needs VGG-19")
+    parser.add_argument("--vgg-weights", metavar="FILE", help="VGG-19 weights (safetensors) for --loss nst")
     parser.add_argument("--tv", type=float, default=0.0, metavar="W", help="total-variation weight on the masks")
     parser.add_argument("--size", type=int, default=512, metavar="PX", help="short side of the working resolution")
     parser.add_argument("--init", metavar="PRESET|FILE", help="start from a preset or a params file (resume)")
@@ -260,7 +261,14 @@ def _cmd_gallery(args: argparse.Namespace, out: TextIO) -> int:
 def _optimization(args: argparse.Namespace, out: TextIO) -> tuple[Settings, dict[str, object]]:
     if args.size < 16:
         raise WiseError(f"--size must be at least 16 pixels, got {args.size}")
-    settings = Settings(mode=args.mode, iterations=args.iters, lr=args.lr, loss=args.loss, tv_weight=args.tv)
+    settings = Settings(
+        mode=args.mode,
+        iterations=args.iters,
+        lr=args.lr,
+        loss=args.loss,
+        tv_weight=args.tv,
+        vgg_weights=args.vgg_weights,
+    )
     options = {"size": args.size, "init": args.init, "seed": args.seed, "device": _device(args.device), "out": out}
     return settings, options
 

@@ -18,8 +18,9 @@ from wise.effects.base import Effect
 from wise.errors import WiseError
 from wise.filters.gaussian import gaussian_blur
 from wise.params import NORMALIZED_MAX, NORMALIZED_MIN, check_params
+from wise.vgg import StyleLoss, load_vgg19
 
-LOSSES = ("l1", "l2")
+LOSSES = ("l1", "l2", "nst")
 MODES = ("local", "global")
 DECAY = 0.98
 DECAY_EVERY = 5
@@ -38,6 +39,8 @@ class Settings:
     lr: float = 0.1
     loss: str = "l1"
     tv_weight: float = 0.0
+    vgg_weights: str | None = None
+    """VGG-19 weights (safetensors) for the ``nst`` loss; default location when None."""
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
@@ -64,9 +67,14 @@ class Outcome:
     interrupted: bool = False
 
 
-def _image_loss(output: torch.Tensor, target: torch.Tensor, kind: str) -> torch.Tensor:
-    difference = output - target
-    return difference.abs().mean() if kind == "l1" else (difference * difference).mean()
+def _image_loss(kind: str, content: torch.Tensor, target: torch.Tensor, vgg_weights: str | None):
+    """The loss as a function of the output: L1, L2, or Gatys' content + style loss (``nst``)
+    with the content photo's features and the target's Gram matrices."""
+    if kind == "nst":
+        return StyleLoss(load_vgg19(vgg_weights).to(content.device), content, target)
+    if kind == "l1":
+        return lambda output: (output - target).abs().mean()
+    return lambda output: ((output - target) ** 2).mean()
 
 
 def total_variation(masks: torch.Tensor) -> torch.Tensor:
@@ -104,6 +112,7 @@ def optimize(
     """
     if content.shape != target.shape:
         raise WiseError(f"content {tuple(content.shape)} and target {tuple(target.shape)} differ in size")
+    image_loss = _image_loss(settings.loss, content, target, settings.vgg_weights)
     params = initial_params(effect, init.to(content), settings.mode, tuple(content.shape[-2:])).requires_grad_()
     optimizer = torch.optim.Adam([params], lr=settings.lr)
     outcome = Outcome(params=params.detach())
@@ -113,7 +122,7 @@ def optimize(
         for iteration in range(1, settings.iterations + 1):
             optimizer.zero_grad(set_to_none=True)
             output = effect(content, params)
-            loss = _image_loss(output, target, settings.loss)
+            loss = image_loss(output)
             if settings.tv_weight > 0 and params.dim() == 4:
                 loss = loss + settings.tv_weight * total_variation(params)
             loss.backward()

@@ -20,6 +20,7 @@ from wise.optimize.parametric import Outcome, Settings, optimize
 from wise.optimize.report import write_animation, write_report
 from wise.paramfile import load_params, save_params
 from wise.render import render
+from wise.vgg import weights_file
 
 ASPECT_TOLERANCE = 0.01
 """Relative aspect-ratio difference up to which a target is resized to the content."""
@@ -83,6 +84,8 @@ def run(
     folder = Path(out_dir)
     if folder.exists() and not folder.is_dir():
         raise WiseError(f"{folder}: exists and is not a directory")
+    if settings.loss == "nst":
+        weights_file(settings.vgg_weights)
     content_full = read_image(content_path)
     target_full = read_image(target_path)
     size_hw = working_size(*content_full.shape[-2:], size)
