@@ -54,3 +54,15 @@ def test_optimize_with_the_nst_loss(weights: Path, tmp_path: Path, capsys) -> No
     assert main(refused) == 2
     assert "VGG-19 weights not found" in capsys.readouterr().err
     assert not (tmp_path / "refused").exists()
+
+
+def test_transfer_by_gatys_with_user_weights(weights: Path, tmp_path: Path, capsys) -> None:
+    content, style = tmp_path / "c.png", tmp_path / "s.png"
+    write_image(torch.rand(1, 3, 32, 40), content)
+    write_image(torch.rand(1, 3, 24, 24), style)
+    out = tmp_path / "t"
+    base = ["transfer", "cartoon", "--content", str(content), "--style", str(style), "--nst", "gatys"]
+    assert main([*base, "-o", str(out), "--iters", "1", "--size", "32", "--vgg-weights", str(weights)]) == 0
+    assert (out / "target.png").exists()
+    assert main([*base, "-o", str(tmp_path / "n"), "--vgg-weights", str(tmp_path / "none.safetensors")]) == 2
+    assert "VGG-19 weights not found" in capsys.readouterr().err and not (tmp_path / "n").exists()

@@ -25,6 +25,7 @@ from wise.gallery import make_sheet
 from wise.io import WRITE_FORMATS, image_to_tensor, read_image, write_image
 from wise.optimize.benchmark import recover as recover_parameters
 from wise.optimize.parametric import LOSSES, MODES, Settings
+from wise.optimize.run import NST_METHODS
 from wise.optimize.run import run as run_optimization
 from wise.optimize.run import transfer as run_transfer
 from wise.paramfile import load_params
@@ -102,6 +103,9 @@ def build_parser() -> argparse.ArgumentParser:
     style = transfer.add_mutually_exclusive_group(required=True)
     style.add_argument("--style", metavar="IMAGE", help="a style image (any painting or drawing)")
     style.add_argument("--builtin-style", type=int, metavar="K", help="one of the built-in styles, 0 to 25")
+    transfer.add_argument(
+        "--nst", choices=NST_METHODS, default="onnx", help="onnx networks (default) or gatys (needs VGG-19 weights)"
+    )
     _add_optimization_options(transfer)
     transfer.set_defaults(func=_cmd_transfer)
 
@@ -288,6 +292,7 @@ def _cmd_transfer(args: argparse.Namespace, out: TextIO) -> int:
         settings,
         builtin_style=args.builtin_style,
         style_path=args.style,
+        method=args.nst,
         **options,
     )
     return 0

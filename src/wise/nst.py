@@ -56,3 +56,30 @@ def stylize(content: torch.Tensor, builtin_style: int | None = None, style: torc
     if result.size != photo.size:
         result = result.resize(photo.size, Image.LANCZOS)
     return image_to_tensor(np.asarray(result))
+
+
+GATYS_STEPS = 200
+GATYS_LR = 0.02
+
+
+def stylize_gatys(
+    content: torch.Tensor, style: torch.Tensor, vgg_weights: str | None = None, steps: int = GATYS_STEPS
+) -> torch.Tensor:
+    """Neural style transfer by optimizing the pixels (Gatys et al. 2016) on VGG-19 features.
+
+    Starts from the content and runs Adam on the content + Gram-matrix style loss of
+    :class:`wise.vgg.StyleLoss`. Needs VGG-19 weights (see :mod:`wise.vgg`).
+    """
+    from wise.vgg import StyleLoss, load_vgg19
+
+    vgg = load_vgg19(vgg_weights).to(content.device)
+    loss = StyleLoss(vgg, content, style)
+    image = content.detach().clone().requires_grad_()
+    optimizer = torch.optim.Adam([image], lr=GATYS_LR)
+    for _ in range(steps):
+        optimizer.zero_grad(set_to_none=True)
+        loss(image).backward()
+        optimizer.step()
+        with torch.no_grad():
+            image.clamp_(0.0, 1.0)
+    return image.detach()

