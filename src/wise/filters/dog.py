@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import torch
 
-from wise.filters._checks import ParamLike, as_map, check_image, max_value, resolution_scale
-from wise.filters.flow import check_direction, pixel_step, spaced_samples, trace_streamlines
-from wise.filters.gaussian import MIN_SIGMA, SUPPORT, in_support
+from wise.filters._checks import ParamLike, as_map, check_image, max_value
+from wise.filters.flow import flow_filter_inputs, pixel_step, spaced_samples, trace_streamlines
+from wise.filters.gaussian import SUPPORT, in_support
 from wise.filters.sampling import offset_grid, sample, sample_at_grid, sample_backward, sum_to, tap_sum
 from wise.filters.structure import gradient_direction
 
@@ -116,10 +116,7 @@ def flow_dog(
     Returns:
         ``(B, C, H, W)``.
     """
-    check_image(image)
-    check_direction(tangent, image, "tangent")
-    s = resolution_scale(image) if scale is None else scale
-    narrow = (as_map(sigma, image, "sigma") * s).clamp_min(MIN_SIGMA)
+    s, narrow = flow_filter_inputs(image, tangent, sigma, scale)
     wide = narrow * WIDE_TO_NARROW
     spacing, steps = spaced_samples(SUPPORT * max_value(wide), max_steps)
     direction = gradient_direction(tangent)
@@ -164,10 +161,7 @@ def flow_smoothing(
     Returns:
         ``(B, C, H, W)``.
     """
-    check_image(image)
-    check_direction(tangent, image, "tangent")
-    s = resolution_scale(image) if scale is None else scale
-    sigma_px = (as_map(sigma, image, "sigma") * s).clamp_min(MIN_SIGMA)
+    s, sigma_px = flow_filter_inputs(image, tangent, sigma, scale)
     step_length, steps = spaced_samples(SUPPORT * max_value(sigma_px), max_steps, max(1.0, s))
     grids = trace_streamlines(tangent.detach(), steps, step_length)
 

@@ -6,7 +6,8 @@ import math
 
 import torch
 
-from wise.filters._checks import check_image
+from wise.filters._checks import ParamLike, as_map, check_image, resolution_scale
+from wise.filters.gaussian import MIN_SIGMA
 from wise.filters.sampling import offset_grid, sample_at_grid
 
 
@@ -43,6 +44,16 @@ class _PixelStep(torch.autograd.Function):
         g_major = -grad / major.abs().clamp_min(1e-6).square() * torch.sign(major)
         zero = torch.zeros_like(g_major)
         return torch.cat((torch.where(x_major, g_major, zero), torch.where(x_major, zero, g_major)), dim=1)
+
+
+def flow_filter_inputs(
+    image: torch.Tensor, tangent: torch.Tensor, sigma: ParamLike, scale: float | None
+) -> tuple[float, torch.Tensor]:
+    """Checks of a filter along a flow field; returns the scale and ``sigma`` in pixels."""
+    check_image(image)
+    check_direction(tangent, image, "tangent")
+    s = resolution_scale(image) if scale is None else scale
+    return s, (as_map(sigma, image, "sigma") * s).clamp_min(MIN_SIGMA)
 
 
 def spaced_samples(reach: float, max_samples: int, min_spacing: float = 1.0) -> tuple[float, int]:

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import torch
 
-from wise.filters._checks import ParamLike, as_map, check_image, max_value, resolution_scale
-from wise.filters.flow import check_direction, pixel_step, spaced_samples
+from wise.filters._checks import ParamLike, max_value
+from wise.filters.flow import flow_filter_inputs, pixel_step, spaced_samples
 from wise.filters.sampling import sample, tap_sum
 from wise.filters.structure import gradient_direction
 
@@ -73,10 +73,7 @@ def flow_log(
     Returns:
         ``(B, C, H, W)``.
     """
-    check_image(image)
-    check_direction(tangent, image, "tangent")
-    s = resolution_scale(image) if scale is None else scale
-    sigma_px = (as_map(sigma, image, "sigma") * s).clamp_min(MIN_SIGMA)
+    _, sigma_px = flow_filter_inputs(image, tangent, sigma, scale)
     spacing, steps = spaced_samples(EXTENT * max_value(sigma_px), max_steps)
     direction = gradient_direction(tangent).expand(image.shape[0], -1, -1, -1)
     step = pixel_step(direction) * spacing
