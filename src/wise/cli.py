@@ -117,7 +117,8 @@ def build_parser() -> argparse.ArgumentParser:
     recover.add_argument("--trials", type=int, default=10, metavar="N", help="number of trials (default 10)")
     recover.add_argument("--size", type=int, default=512, metavar="PX", help="short side of the photos (default 512)")
     recover.add_argument("--seed", type=int, default=0, help="seed of the random parameters")
-    recover.add_argument("--iters", type=int, default=300, metavar="N", help="iterations per trial")
+    recover.add_argument("--iters", type=int, default=300, metavar="N", help="iterations per trial, all levels")
+    recover.add_argument("--lr", type=float, default=0.1, help="learning rate of the coarsest level (default 0.1)")
     recover.add_argument("--loss", choices=LOSSES, default="l2", help="image loss (default l2)")
     recover.add_argument("--json", required=True, metavar="OUT", help="write the results here")
     recover.set_defaults(func=_cmd_bench_recover)
@@ -265,6 +266,8 @@ def _cmd_gallery(args: argparse.Namespace, out: TextIO) -> int:
 def _optimization(args: argparse.Namespace, out: TextIO) -> tuple[Settings, dict[str, object]]:
     if args.size < 16:
         raise WiseError(f"--size must be at least 16 pixels, got {args.size}")
+    if not args.lr > 0 or args.iters < 1:
+        raise WiseError(f"--lr must be positive and --iters at least 1, got {args.lr} and {args.iters}")
     settings = Settings(
         mode=args.mode,
         iterations=args.iters,
@@ -301,6 +304,8 @@ def _cmd_transfer(args: argparse.Namespace, out: TextIO) -> int:
 def _cmd_bench_recover(args: argparse.Namespace, out: TextIO) -> int:
     if args.size < 16:
         raise WiseError(f"--size must be at least 16 pixels, got {args.size}")
+    if not args.lr > 0 or args.iters < 1:
+        raise WiseError(f"--lr must be positive and --iters at least 1, got {args.lr} and {args.iters}")
     if Path(args.json).parent and not Path(args.json).parent.is_dir():
         raise WiseError(f"{args.json}: the directory {Path(args.json).parent} does not exist")
     recover_parameters(
@@ -310,6 +315,7 @@ def _cmd_bench_recover(args: argparse.Namespace, out: TextIO) -> int:
         args.size,
         args.seed,
         args.iters,
+        lr=args.lr,
         loss=args.loss,
         json_path=args.json,
         out=out,

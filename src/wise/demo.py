@@ -43,9 +43,10 @@ def run(out_dir: Path) -> list[Path]:
     return written
 
 
-DEMO_STYLE = 7
+DEMO_STYLE = 0
+"""A soft painterly built-in style."""
 DEMO_SIZE = 256
-DEMO_ITERATIONS = 150
+DEMO_ITERATIONS = 200
 
 
 def transfer_demo(out_dir: Path) -> Path:

@@ -82,3 +82,25 @@ def test_bad_shapes_are_refused(astronaut_small: torch.Tensor) -> None:
         W.rgb_to_lab(astronaut_small[:, :2])
     with pytest.raises(WiseError, match="contrast"):
         W.adjust_color(astronaut_small, contrast=torch.ones(1, 1, 5, 5))
+
+
+def test_white_balance_offsets_are_orthogonal_and_keep_grey_grey() -> None:
+    mid = torch.full((1, 3, 1, 1), 0.5, dtype=torch.float64)
+    warm = W.adjust_color(mid, temperature=0.2).flatten()
+    magenta = W.adjust_color(mid, tint=0.2).flatten()
+    assert torch.allclose(warm, torch.tensor([0.6, 0.5, 0.4], dtype=torch.float64))
+    assert torch.allclose(magenta, torch.tensor([0.6, 0.3, 0.6], dtype=torch.float64))
+    assert abs(float(((warm - 0.5) * (magenta - 0.5)).sum())) < 1e-12
+    assert float((warm - 0.5).sum()) == pytest.approx(0.0) and float((magenta - 0.5).sum()) == pytest.approx(0.0)
+
+
+def test_brightness_temperature_and_tint_masks_reach_any_colour() -> None:
+    grey = torch.full((1, 3, 1, 1), 0.5, dtype=torch.float64)
+    wanted = torch.tensor([0.2, 0.7, 0.9], dtype=torch.float64)
+    offset = wanted - 0.5
+    brightness = offset.mean()
+    temperature = offset[0] - offset[2]
+    tint = (offset[0] + offset[2]) / 2 - offset[1]
+    tint = 2.0 * tint / 3.0
+    out = W.adjust_color(grey, brightness=float(brightness), temperature=float(temperature), tint=float(tint))
+    assert torch.allclose(out.flatten(), wanted, atol=1e-9)

@@ -4,8 +4,10 @@ from pathlib import Path
 import torch
 import torch.nn.functional as F
 
+from wise import effects
 from wise.cli import main
 from wise.io import write_image
+from wise.optimize.benchmark import MIN_REFERENCE_CONTRAST, PSNR_CAP, random_reference, schedule
 
 
 def test_recover_benchmark_writes_per_trial_rows(tmp_path: Path, astronaut: torch.Tensor, capsys) -> None:
@@ -27,3 +29,37 @@ def test_recover_refuses_an_empty_folder(tmp_path: Path, capsys) -> None:
     args = ["bench", "recover", "xdog", "--images", str(tmp_path), "--json", str(tmp_path / "r.json")]
     assert main(args) == 2
     assert "no images" in capsys.readouterr().err
+
+
+def test_random_references_are_never_blank(astronaut: torch.Tensor) -> None:
+    effect = effects.create("xdog")
+    content = F.interpolate(astronaut, size=(48, 48), mode="area")
+    generator = torch.Generator().manual_seed(3)
+    for _ in range(6):
+        truth, reference = random_reference(effect, content, generator)
+        assert truth.shape == (1, len(effect.param_specs)) and truth.abs().max() <= 0.5
+        assert float(reference.std()) >= MIN_REFERENCE_CONTRAST
+
+
+def test_schedule_spends_most_iterations_on_small_copies() -> None:
+    levels = schedule(100, 0.1, "l2")
+    assert [reduction for reduction, _ in levels][-1] == 1
+    assert sum(s.iterations for _, s in levels) == 100
+    assert levels[0][1].iterations > levels[-1][1].iterations and levels[-1][1].lr < levels[0][1].lr
+
+
+def test_an_exact_recovery_counts_as_the_psnr_cap(tmp_path: Path, astronaut: torch.Tensor, monkeypatch) -> None:
+    from wise.optimize import benchmark
+
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    write_image(F.interpolate(astronaut, size=(32, 32), mode="area"), photos / "a.png")
+
+    def same_as_default(effect, content, generator):
+        truth = effect.default_params()[None]
+        return truth, effect(content, truth)
+
+    monkeypatch.setattr(benchmark, "random_reference", same_as_default)
+    with open(tmp_path / "log", "w") as log:
+        result = benchmark.recover("xdog", str(photos), trials=1, size=32, iterations=3, lr=1e-6, out=log)
+    assert result["trials"][0]["psnr"] == PSNR_CAP and result["mean_psnr"] == PSNR_CAP

@@ -5,6 +5,7 @@ import torch.nn.functional as F
 import wise
 from wise.errors import WiseError
 from wise.optimize import Settings, optimize
+from wise.optimize.parametric import optimize_coarse_to_fine
 
 
 @pytest.fixture(scope="module")
@@ -43,3 +44,47 @@ def test_bad_settings_are_refused() -> None:
     for bad in ({"mode": "x"}, {"loss": "x"}, {"iterations": 0}, {"lr": 0.0}, {"tv_weight": -1.0}):
         with pytest.raises(WiseError):
             Settings(**bad)
+
+
+def test_coarse_to_fine_carries_the_parameters_up_the_pyramid(content: torch.Tensor) -> None:
+    effect = wise.effects.create("cartoon")
+    target_params = effect.params_from_dict({"saturation": 0.3, "contrast": 1.6, "brightness": -0.1})
+    with torch.no_grad():
+        target = effect(content, target_params[None])
+    levels = ((4, Settings(mode="global", iterations=20)), (1, Settings(mode="global", iterations=5, lr=0.02)))
+    outcome = optimize_coarse_to_fine(effect, content, target, effect.default_params(), levels)
+    assert len(outcome.losses) == 25 and outcome.result is not None and outcome.result.shape == content.shape
+    start_error = float((effect(content, effect.default_params()[None]) - target).abs().mean())
+    assert float((outcome.result - target).abs().mean()) < 0.5 * start_error
+
+
+def test_coarse_to_fine_interrupted_on_a_coarse_level_returns_full_size_masks(content: torch.Tensor) -> None:
+    effect = wise.effects.create("xdog")
+
+    def stop_after_two(iteration: int, loss: float, output: torch.Tensor) -> None:
+        if iteration == 2:
+            raise KeyboardInterrupt
+
+    levels = ((2, Settings(iterations=10)), (1, Settings(iterations=10)))
+    outcome = optimize_coarse_to_fine(
+        effect, content, torch.ones_like(content), effect.default_params(), levels, stop_after_two
+    )
+    assert outcome.interrupted and len(outcome.losses) == 2
+    assert outcome.params.shape[-2:] == content.shape[-2:]
+    assert outcome.result is not None and outcome.result.shape == content.shape
+
+
+@pytest.mark.parametrize("name", ["watercolor"])
+def test_masks_optimized_small_render_the_same_picture_four_times_larger(astronaut: torch.Tensor, name: str) -> None:
+    from wise import metrics
+    from wise.render import render
+
+    effect = wise.effects.create(name)
+    small = F.interpolate(astronaut, size=(64, 64), mode="area")
+    target = F.interpolate(astronaut.flip(1), size=(64, 64), mode="area")  # colours the effect must paint
+    outcome = optimize(effect, small, target, effect.default_params(), Settings(iterations=30))
+    assert outcome.result is not None
+    large = render(effect, F.interpolate(astronaut, size=(256, 256), mode="area"), outcome.params)
+    reduced = F.interpolate(large, size=(64, 64), mode="area")
+    assert metrics.l1(reduced, outcome.result) < 0.35 * metrics.l1(small, target)
+    assert metrics.ssim(reduced, outcome.result) > 0.8

@@ -30,6 +30,8 @@ class Cartoon(Effect):
         ParamSpec("brightness", -0.3, 0.3, 0.0, "added to the input colours"),
         ParamSpec("contrast", 0.5, 2.0, 1.1, "contrast of the input around mid-grey"),
         ParamSpec("saturation", 0.0, 3.0, 1.4, "colour saturation"),
+        ParamSpec("temperature", -0.5, 0.5, 0.0, "white balance: warmer (positive) or cooler colours"),
+        ParamSpec("tint", -0.5, 0.5, 0.0, "white balance: magenta (positive) or green tint"),
         ParamSpec("gamma", 0.5, 2.0, 1.0, "gamma of the input (above 1 brightens mid-tones)"),
         ParamSpec("details", 0.0, 3.0, 1.2, "more detail: less abstraction and finer outlines"),
         ParamSpec("bins", 2.0, 16.0, 8.0, "number of luminance levels"),
@@ -79,6 +81,8 @@ class Cartoon(Effect):
             contrast=p["contrast"],
             saturation=p["saturation"],
             gamma=p["gamma"],
+            temperature=p["temperature"],
+            tint=p["tint"],
         )
         lab = self.recomputed(rgb_to_lab, adjusted)
         tangent = self.stage(edge_flow, lab[:, :1], sigmas["structure"], scale)

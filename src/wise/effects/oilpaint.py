@@ -69,6 +69,8 @@ class OilPaint(Effect):
         ParamSpec("brightness", -0.2, 0.3, 0.0, "added to the input colours"),
         ParamSpec("contrast", 0.5, 2.0, 1.1, "contrast of the input around mid-grey"),
         ParamSpec("saturation", 0.0, 2.5, 1.2, "colour saturation"),
+        ParamSpec("temperature", -0.5, 0.5, 0.0, "white balance: warmer (positive) or cooler colours"),
+        ParamSpec("tint", -0.5, 0.5, 0.0, "white balance: magenta (positive) or green tint"),
         ParamSpec("details", 0.0, 3.0, 1.5, "more detail: less colour abstraction"),
         ParamSpec("stroke_length", 1.0, 12.0, 5.0, "length of the brush strokes along the flow"),
         ParamSpec("brush_size", 0.3, 3.0, 0.8, "width of the bristle grooves across the strokes"),
@@ -121,7 +123,13 @@ class OilPaint(Effect):
         scale = ctx.scale
 
         adjusted = self.recomputed(
-            adjust_color, image, brightness=p["brightness"], contrast=p["contrast"], saturation=p["saturation"]
+            adjust_color,
+            image,
+            brightness=p["brightness"],
+            contrast=p["contrast"],
+            saturation=p["saturation"],
+            temperature=p["temperature"],
+            tint=p["tint"],
         )
         lab = self.recomputed(rgb_to_lab, adjusted)
         structure = self.stage(smoothed_structure_tensor, lab[:, :1], FLOW_DERIVATIVE, FLOW_SMOOTHING, scale)

@@ -80,6 +80,8 @@ class Watercolor(Effect):
         ParamSpec("brightness", -0.2, 0.3, 0.05, "added to the input colours"),
         ParamSpec("contrast", 0.5, 2.0, 1.0, "contrast of the input around mid-grey"),
         ParamSpec("saturation", 0.0, 2.0, 1.15, "colour saturation"),
+        ParamSpec("temperature", -0.5, 0.5, 0.0, "white balance: warmer (positive) or cooler colours"),
+        ParamSpec("tint", -0.5, 0.5, 0.0, "white balance: magenta (positive) or green tint"),
         ParamSpec("abstraction", 1.0, 8.0, 4.0, "radius of the Kuwahara washes"),
         ParamSpec("bleeding", 0.0, 8.0, 3.0, "how far colours bleed across wet edges"),
         ParamSpec("wobble", 0.0, 3.0, 1.0, "displacement of the washes by the paper (reference pixels)"),
@@ -171,7 +173,13 @@ class Watercolor(Effect):
         scale, origin, seed = ctx.scale, ctx.origin, self.seed
 
         adjusted = self.recomputed(
-            adjust_color, image, brightness=p["brightness"], contrast=p["contrast"], saturation=p["saturation"]
+            adjust_color,
+            image,
+            brightness=p["brightness"],
+            contrast=p["contrast"],
+            saturation=p["saturation"],
+            temperature=p["temperature"],
+            tint=p["tint"],
         )
         luminance = self.recomputed(rgb_to_lab, adjusted)[:, :1]
         structure = self.stage(smoothed_structure_tensor, luminance, FLOW_DERIVATIVE, FLOW_SMOOTHING, scale)

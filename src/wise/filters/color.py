@@ -116,6 +116,18 @@ def _scale_saturation(image: torch.Tensor, factor: torch.Tensor) -> torch.Tensor
     return value - k * (value - image)
 
 
+def _is_number(value: ParamLike, number: float) -> bool:
+    return isinstance(value, (int, float)) and value == number
+
+
+def _white_balance_shift(temperature: torch.Tensor, tint: torch.Tensor) -> torch.Tensor:
+    """RGB offsets (B, 3, H, W) of a white-balance change: warm/cool and magenta/green."""
+    red = 0.5 * (temperature + tint)
+    green = -tint
+    blue = 0.5 * (tint - temperature)
+    return torch.cat(torch.broadcast_tensors(red, green, blue), dim=1)
+
+
 def adjust_color(
     image: torch.Tensor,
     brightness: ParamLike = 0.0,
@@ -124,16 +136,21 @@ def adjust_color(
     gamma: ParamLike = 1.0,
     exposure: ParamLike = 1.0,
     hue_shift: ParamLike = 0.0,
+    temperature: ParamLike = 0.0,
+    tint: ParamLike = 0.0,
 ) -> torch.Tensor:
     """Colour adjustment as in the WISE cartoon/XDoG pipelines (Lötzsch et al. 2022, Fig. 3).
 
     In order: add ``brightness``, multiply by ``exposure``, scale ``contrast`` around
-    mid-grey, clamp to [0, 1], scale the HSV ``saturation``, rotate the hue by
-    ``hue_shift`` (in turns), and apply ``gamma`` (``x ** (1 / gamma)``).
+    mid-grey, shift the white balance by ``temperature`` (red up and blue down by half of it)
+    and ``tint`` (green down by it, red and blue up by half of it), clamp to [0, 1], scale the
+    HSV ``saturation``, rotate the hue by ``hue_shift`` (in turns), and apply ``gamma``
+    (``x ** (1 / gamma)``). Brightness, temperature and tint are orthogonal RGB offsets: as
+    masks they can set any colour per pixel.
 
     Args:
         image: ``(B, 3, H, W)`` RGB in [0, 1].
-        brightness, contrast, saturation, gamma, exposure, hue_shift: floats,
+        brightness, contrast, saturation, gamma, exposure, hue_shift, temperature, tint: floats,
             ``(B,)`` tensors or ``(B, 1, H, W)`` maps.
 
     Returns:
@@ -141,13 +158,16 @@ def adjust_color(
     """
     check_image(image, channels=3)
     out = (image + as_map(brightness, image, "brightness")) * as_map(exposure, image, "exposure")
-    out = ((out - 0.5) * as_map(contrast, image, "contrast") + 0.5).clamp(0.0, 1.0)
-    if not (isinstance(saturation, (int, float)) and saturation == 1.0):
+    out = (out - 0.5) * as_map(contrast, image, "contrast") + 0.5
+    if not (_is_number(temperature, 0.0) and _is_number(tint, 0.0)):
+        out = out + _white_balance_shift(as_map(temperature, image, "temperature"), as_map(tint, image, "tint"))
+    out = out.clamp(0.0, 1.0)
+    if not _is_number(saturation, 1.0):
         out = _scale_saturation(out, as_map(saturation, image, "saturation"))
-    if not (isinstance(hue_shift, (int, float)) and hue_shift == 0.0):
+    if not _is_number(hue_shift, 0.0):
         hsv = rgb_to_hsv(out)
         hue = torch.remainder(hsv[:, 0:1] + as_map(hue_shift, image, "hue_shift"), 1.0)
         out = hsv_to_rgb(torch.cat((hue, hsv[:, 1:]), dim=1))
-    if not (isinstance(gamma, (int, float)) and gamma == 1.0):
+    if not _is_number(gamma, 1.0):
         out = out.clamp_min(_POW_FLOOR) ** (1.0 / as_map(gamma, image, "gamma").clamp_min(0.1))
     return out.clamp(0.0, 1.0)

@@ -128,7 +128,7 @@ def optimize(
             loss.backward()
             optimizer.step()
             with torch.no_grad():
-                if params.dim() == 4 and iteration in SMOOTH_AT:
+                if params.dim() == 4 and iteration in SMOOTH_AT and iteration < settings.iterations:
                     params.copy_(gaussian_blur(params, MASK_SMOOTHING_SIGMA, scale=1.0))
                 params.clamp_(NORMALIZED_MIN, NORMALIZED_MAX)
             if iteration >= DECAY_FROM and iteration % DECAY_EVERY == 0:
@@ -144,4 +144,44 @@ def optimize(
     outcome.seconds = time.perf_counter() - start
     with torch.no_grad():
         outcome.result = effect(content, outcome.params)
+    return outcome
+
+
+def optimize_coarse_to_fine(
+    effect: Effect,
+    content: torch.Tensor,
+    target: torch.Tensor,
+    init: torch.Tensor,
+    levels: tuple[tuple[int, Settings], ...],
+    on_step: Callable[[int, float, torch.Tensor], None] | None = None,
+) -> Outcome:
+    """:func:`optimize` on an image pyramid: each ``(reduction, settings)`` level works on the
+    images reduced by that factor and starts from the previous level's parameters.
+
+    The effects are resolution-independent, so the parameters found on a small copy carry
+    over; most iterations then cost a fraction of a full-resolution one. The last level
+    should have a reduction of 1. Returns the last level's outcome with the losses and time
+    of all levels.
+    """
+    params, losses, seconds = init, [], 0.0
+    outcome, mode = None, "global"
+    for reduction, settings in levels:
+        mode = settings.mode
+        if reduction > 1:
+            size = (max(8, content.shape[-2] // reduction), max(8, content.shape[-1] // reduction))
+            level_content = torch.nn.functional.interpolate(content, size=size, mode="area")
+            level_target = torch.nn.functional.interpolate(target, size=size, mode="area")
+        else:
+            level_content, level_target = content, target
+        outcome = optimize(effect, level_content, level_target, params, settings, on_step)
+        params, seconds = outcome.params, seconds + outcome.seconds
+        losses.extend(outcome.losses)
+        if outcome.interrupted:
+            break
+    assert outcome is not None, "levels must not be empty"
+    if outcome.result is not None and outcome.result.shape[-2:] != content.shape[-2:]:
+        with torch.no_grad():
+            outcome.params = initial_params(effect, outcome.params, mode, tuple(content.shape[-2:]))
+            outcome.result = effect(content, outcome.params)
+    outcome.losses, outcome.seconds = losses, seconds
     return outcome
