@@ -7,7 +7,14 @@ from typing import Mapping
 import torch
 
 from wise.effects.base import Effect, RenderContext
-from wise.effects.common import LUMINANCE_RANGE, detail_sigmas, edge_flow, flow_pipeline_halo, xdog_lines
+from wise.effects.common import (
+    LUMINANCE_RANGE,
+    colour_adjustments,
+    detail_sigmas,
+    edge_flow,
+    flow_pipeline_halo,
+    xdog_lines,
+)
 from wise.filters import adjust_color, lab_to_rgb, oriented_bilateral, rgb_to_lab
 from wise.filters.composite import blend
 from wise.filters.quantize import quantize
@@ -74,16 +81,7 @@ class Cartoon(Effect):
         sigmas = detail_sigmas(p["details"])
         samples, scale = self.kernel_size, ctx.scale
 
-        adjusted = self.recomputed(
-            adjust_color,
-            image,
-            brightness=p["brightness"],
-            contrast=p["contrast"],
-            saturation=p["saturation"],
-            gamma=p["gamma"],
-            temperature=p["temperature"],
-            tint=p["tint"],
-        )
+        adjusted = self.recomputed(adjust_color, image, **colour_adjustments(p))
         lab = self.recomputed(rgb_to_lab, adjusted)
         tangent = self.stage(edge_flow, lab[:, :1], sigmas["structure"], scale)
         abstracted = lab

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import Mapping
 
 import torch
 
@@ -81,3 +82,11 @@ def flow_pipeline_halo(scale: float, kernel_size: int, bilateral_applications: i
     bilateral_steps = bilateral_applications * 2 * 2 * kernel_size
     dog_reach = max(kernel_size + 2, SUPPORT * WIDE_TO_NARROW * MAX_STROKE_WIDTH * scale)
     return math.ceil(flow_reach + DIAGONAL_STEP * (bilateral_steps + dog_reach)) + 2
+
+
+COLOUR_ADJUSTMENTS = ("brightness", "contrast", "saturation", "gamma", "temperature", "tint")
+
+
+def colour_adjustments(p: Mapping[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    """The colour-adjustment parameters an effect declares, as keywords of ``adjust_color``."""
+    return {name: p[name] for name in COLOUR_ADJUSTMENTS if name in p}

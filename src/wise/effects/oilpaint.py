@@ -8,7 +8,7 @@ from typing import Mapping
 import torch
 
 from wise.effects.base import Effect, RenderContext
-from wise.effects.common import LUMINANCE_RANGE, detail_sigmas
+from wise.effects.common import LUMINANCE_RANGE, colour_adjustments, detail_sigmas
 from wise.filters import (
     adjust_color,
     edge_tangent_flow,
@@ -122,15 +122,7 @@ class OilPaint(Effect):
         sigmas = detail_sigmas(p["details"])
         scale = ctx.scale
 
-        adjusted = self.recomputed(
-            adjust_color,
-            image,
-            brightness=p["brightness"],
-            contrast=p["contrast"],
-            saturation=p["saturation"],
-            temperature=p["temperature"],
-            tint=p["tint"],
-        )
+        adjusted = self.recomputed(adjust_color, image, **colour_adjustments(p))
         lab = self.recomputed(rgb_to_lab, adjusted)
         structure = self.stage(smoothed_structure_tensor, lab[:, :1], FLOW_DERIVATIVE, FLOW_SMOOTHING, scale)
         tangent = self.stage(edge_tangent_flow, structure)

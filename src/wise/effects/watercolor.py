@@ -9,7 +9,7 @@ from typing import Mapping
 import torch
 
 from wise.effects.base import Effect, RenderContext
-from wise.effects.common import LUMINANCE_RANGE, detail_sigmas, xdog_lines
+from wise.effects.common import LUMINANCE_RANGE, colour_adjustments, detail_sigmas, xdog_lines
 from wise.filters import (
     adjust_color,
     edge_tangent_flow,
@@ -172,15 +172,7 @@ class Watercolor(Effect):
     def render(self, image: torch.Tensor, p: Mapping[str, torch.Tensor], ctx: RenderContext) -> torch.Tensor:
         scale, origin, seed = ctx.scale, ctx.origin, self.seed
 
-        adjusted = self.recomputed(
-            adjust_color,
-            image,
-            brightness=p["brightness"],
-            contrast=p["contrast"],
-            saturation=p["saturation"],
-            temperature=p["temperature"],
-            tint=p["tint"],
-        )
+        adjusted = self.recomputed(adjust_color, image, **colour_adjustments(p))
         luminance = self.recomputed(rgb_to_lab, adjusted)[:, :1]
         structure = self.stage(smoothed_structure_tensor, luminance, FLOW_DERIVATIVE, FLOW_SMOOTHING, scale)
         tangent = edge_tangent_flow(structure)
