@@ -24,7 +24,7 @@ from wise.errors import WiseError
 from wise.gallery import make_sheet
 from wise.io import WRITE_FORMATS, image_to_tensor, read_image, write_image
 from wise.optimize.benchmark import recover as recover_parameters
-from wise.optimize.parametric import LOSSES, MODES, Settings
+from wise.optimize.parametric import LOSSES, MODES, PYRAMIDS, Settings
 from wise.optimize.run import NST_METHODS
 from wise.optimize.run import run as run_optimization
 from wise.optimize.run import transfer as run_transfer
@@ -130,6 +130,13 @@ def _add_optimization_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mode", choices=MODES, default="local", help="per-pixel masks (default) or global values")
     parser.add_argument("--iters", type=int, default=Settings.iterations, metavar="N", help="iterations")
     parser.add_argument("--lr", type=float, default=Settings.lr, help="Adam learning rate (default 0.1)")
+    parser.add_argument(
+        "--levels",
+        type=int,
+        choices=sorted(PYRAMIDS),
+        default=Settings.levels,
+        help="coarse-to-fine pyramid levels (default %(default)s; 1: every iteration at --size)",
+    )
     parser.add_argument("--loss", choices=LOSSES, default="l1", help="image loss (default l1); nst needs VGG-19")
     parser.add_argument("--vgg-weights", metavar="FILE", help="VGG-19 weights (safetensors) for --loss nst")
     parser.add_argument("--tv", type=float, default=0.0, metavar="W", help="total-variation weight on the masks")
@@ -275,6 +282,7 @@ def _optimization(args: argparse.Namespace, out: TextIO) -> tuple[Settings, dict
         loss=args.loss,
         tv_weight=args.tv,
         vgg_weights=args.vgg_weights,
+        levels=args.levels,
     )
     options = {"size": args.size, "init": args.init, "seed": args.seed, "device": _device(args.device), "out": out}
     return settings, options

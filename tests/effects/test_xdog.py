@@ -26,6 +26,7 @@ def test_api_and_presets(effect) -> None:
         "stroke_width",
         "contour",
         "blackness",
+        "shading",
     ]
     portrait = effect.params_to_dict(effect.preset("portrait"))
     assert portrait["details"] == pytest.approx(2.27) and portrait["blackness"] == pytest.approx(0.15)
@@ -79,7 +80,7 @@ def test_constant_mask_equals_global(effect, photo) -> None:
 
 def test_quarter_resolution_mask_equals_upsampled_mask(effect, photo) -> None:
     torch.manual_seed(1)
-    mask = effect.preset("portrait")[None, :, None, None] + 0.2 * (torch.rand(1, 7, 48, 48) - 0.5)
+    mask = effect.preset("portrait")[None, :, None, None] + 0.2 * (torch.rand(1, len(effect.param_specs), 48, 48) - 0.5)
     upsampled = F.interpolate(mask, size=photo.shape[-2:], mode="bilinear", align_corners=False)
     with torch.no_grad():
         assert torch.allclose(effect(photo, mask), effect(photo, upsampled), atol=1e-5)
@@ -135,3 +136,22 @@ def test_bad_inputs(effect, photo) -> None:
         effect(photo, params[:, :5])
     with pytest.raises(WiseError, match="float"):
         effect((photo * 255).to(torch.uint8), params)
+
+
+def test_shading_adds_tones_and_a_gradient_where_lines_are_white(effect, photo) -> None:
+    plain = effect.preset("portrait")[None]
+    assert effect.params_to_dict(plain[0])["shading"] == pytest.approx(0.0)
+    with torch.no_grad():
+        lines = effect(photo, plain)
+        shaded = effect(photo, effect.params_from_dict({"shading": 1.0}, preset="portrait")[None])
+    assert (shaded <= lines + 1e-6).all(), "shading only darkens"
+    white = lines[:, :1] > 0.99
+    assert white.float().mean() > 0.3
+    # dark regions of the photo turn grey or black where the lines alone are white
+    assert float((lines - shaded)[:, :1][white].mean()) > 0.1
+    assert float(shaded.std()) > float(lines.std()) * 0.5
+
+    masks = plain[:, :, None, None].expand(-1, -1, *photo.shape[-2:]).clone().requires_grad_()
+    effect(photo, masks).mean().backward()
+    shading_gradient = masks.grad[0, [s.name for s in effect.param_specs].index("shading")]
+    assert float(shading_gradient[white[0, 0]].abs().mean()) > 0, "no gradient to darken flat white areas"

@@ -5,7 +5,7 @@ import torch.nn.functional as F
 import wise
 from wise.errors import WiseError
 from wise.optimize import Settings, optimize
-from wise.optimize.parametric import optimize_coarse_to_fine
+from wise.optimize.parametric import PYRAMIDS, optimize_coarse_to_fine, pyramid
 
 
 @pytest.fixture(scope="module")
@@ -41,7 +41,7 @@ def test_interrupt_keeps_the_state_reached(content: torch.Tensor) -> None:
 
 
 def test_bad_settings_are_refused() -> None:
-    for bad in ({"mode": "x"}, {"loss": "x"}, {"iterations": 0}, {"lr": 0.0}, {"tv_weight": -1.0}):
+    for bad in ({"mode": "x"}, {"loss": "x"}, {"iterations": 0}, {"lr": 0.0}, {"tv_weight": -1.0}, {"levels": 9}):
         with pytest.raises(WiseError):
             Settings(**bad)
 
@@ -56,6 +56,36 @@ def test_coarse_to_fine_carries_the_parameters_up_the_pyramid(content: torch.Ten
     assert len(outcome.losses) == 25 and outcome.result is not None and outcome.result.shape == content.shape
     start_error = float((effect(content, effect.default_params()[None]) - target).abs().mean())
     assert float((outcome.result - target).abs().mean()) < 0.5 * start_error
+
+
+@pytest.mark.parametrize("levels", sorted(PYRAMIDS))
+@pytest.mark.parametrize("iterations", [1, 2, 7, 300])
+def test_pyramid_spends_exactly_the_iterations_and_ends_at_full_size(levels: int, iterations: int) -> None:
+    settings = Settings(iterations=iterations, lr=0.2, levels=levels, mode="global", loss="l2")
+    plan = pyramid(settings)
+    assert sum(s.iterations for _, s in plan) == iterations
+    assert plan[-1][0] == 1 and all(s.iterations >= 1 for _, s in plan)
+    reductions = [r for r, _ in plan]
+    assert reductions == sorted(reductions, reverse=True)
+    assert all(s.mode == "global" and s.loss == "l2" and s.lr <= 0.2 for _, s in plan)
+    if iterations == 300:
+        assert len(plan) == levels and plan[0][1].lr == pytest.approx(0.2)
+
+
+def test_coarse_to_fine_counts_iterations_over_all_levels(content: torch.Tensor) -> None:
+    effect = wise.effects.create("xdog")
+    seen: list[tuple[int, tuple[int, ...]]] = []
+    levels = pyramid(Settings(mode="global", iterations=6, levels=2))
+    optimize_coarse_to_fine(
+        effect,
+        content,
+        torch.ones_like(content),
+        effect.default_params(),
+        levels,
+        lambda i, loss, output: seen.append((i, tuple(output.shape[-2:]))),
+    )
+    assert [i for i, _ in seen] == [1, 2, 3, 4, 5, 6]
+    assert seen[0][1] == (32, 32) and seen[-1][1] == (64, 64)
 
 
 def test_coarse_to_fine_interrupted_on_a_coarse_level_returns_full_size_masks(content: torch.Tensor) -> None:

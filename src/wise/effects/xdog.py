@@ -17,18 +17,24 @@ class XDoG(Effect):
 
     Pipeline: colour adjustment -> CIE Lab -> smoothed structure tensor -> edge tangent
     flow -> orientation-aligned bilateral filter -> DoG across the flow -> line-integral
-    smoothing along the flow -> soft threshold.
+    smoothing along the flow -> soft threshold -> multiplied over the shading.
+
+    The shading ``1 - s * (1 - L)`` of the abstracted luminance ``L`` adds pencil-like tones:
+    with ``s = 0`` (the presets) the drawing is the classic black-on-white XDoG. The default
+    is half-toned: the tone also gives optimization a gradient where the thresholded lines are
+    flat white.
     """
 
     name = "xdog"
     param_specs = (
-        ParamSpec("brightness", -0.15, 0.5, 0.1, "added to the input colours"),
+        ParamSpec("brightness", -0.15, 0.5, 0.0, "added to the input colours"),
         ParamSpec("contrast", 0.2, 3.0, 1.15, "contrast of the input around mid-grey"),
         ParamSpec("saturation", 0.0, 3.0, 1.02, "colour saturation of the input"),
         ParamSpec("details", 0.0, 3.0, 2.27, "more detail: less abstraction and finer edges"),
         ParamSpec("stroke_width", 0.3, 1.2, 0.54, "width of the lines (sigma of the DoG)"),
         ParamSpec("contour", 0.0, 3.0, 1.0, "strength of the edge response"),
         ParamSpec("blackness", 0.01, 0.5, 0.15, "threshold below which pixels turn black"),
+        ParamSpec("shading", 0.0, 1.0, 0.5, "grey tones of the abstracted image under the lines (0: lines on white)"),
     )
     presets = {
         "portrait": {
@@ -39,6 +45,7 @@ class XDoG(Effect):
             "stroke_width": 0.54,
             "contour": 1.0,
             "blackness": 0.15,
+            "shading": 0.0,
         },
         "sketch": {
             "brightness": 0.1,
@@ -48,6 +55,7 @@ class XDoG(Effect):
             "stroke_width": 0.2,
             "contour": 3.0,
             "blackness": 0.5,
+            "shading": 0.0,
         },
     }
 
@@ -78,4 +86,6 @@ class XDoG(Effect):
             samples,
             scale,
         )
-        return lines.expand(-1, 3, -1, -1)
+        luminance = (abstracted[:, :1] / LUMINANCE_RANGE).clamp(0.0, 1.0)
+        shading = 1.0 - p["shading"] * (1.0 - luminance)
+        return (lines * shading).expand(-1, 3, -1, -1)

@@ -20,7 +20,7 @@ from wise import effects, metrics
 from wise.effects.base import Effect
 from wise.errors import WiseError
 from wise.io import READ_FORMATS, atomic_path, read_image
-from wise.optimize.parametric import Settings, optimize_coarse_to_fine
+from wise.optimize.parametric import Settings, optimize_coarse_to_fine, pyramid
 
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".webp", ".tif", ".tiff"}
 PSNR_CAP = 60.0
@@ -36,10 +36,7 @@ Global parameters carry over between resolutions, so most iterations run on smal
 
 def schedule(iterations: int, lr: float, loss: str) -> tuple[tuple[int, Settings], ...]:
     """The levels of :data:`LEVELS` for ``iterations`` in all."""
-    return tuple(
-        (reduction, Settings(mode="global", iterations=max(1, round(iterations * share)), lr=lr * rate, loss=loss))
-        for reduction, share, rate in LEVELS
-    )
+    return pyramid(Settings(mode="global", iterations=iterations, lr=lr, loss=loss), LEVELS)
 
 
 def random_reference(

@@ -3,14 +3,17 @@
 Follows WISE Sec. 5.1: Adam on global parameters or per-pixel parameter masks with an image
 loss, the learning rate multiplied by 0.98 every 5 iterations from iteration 50, and the masks
 smoothed by a Gaussian at iterations 10, 25, 50, 100, 250 and 500 against fragmented masks;
-optionally a total-variation penalty on the masks.
+optionally a total-variation penalty on the masks. By default the iterations run coarse to
+fine on an image pyramid (:data:`PYRAMIDS`): the effects are resolution-independent, so masks
+found on a reduced copy carry over, and the early, large Adam steps are taken where they are
+cheap and where a step of one mask pixel covers a larger region of the image.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
-from typing import Callable
+from dataclasses import dataclass, field, replace
+from typing import Callable, Sequence
 
 import torch
 
@@ -28,6 +31,13 @@ DECAY_FROM = 50
 SMOOTH_AT = (10, 25, 50, 100, 250, 500)
 MASK_SMOOTHING_SIGMA = 1.0
 """Sigma (mask pixels) of the Gaussian applied to the masks at ``SMOOTH_AT``."""
+PYRAMIDS: dict[int, tuple[tuple[int, float, float], ...]] = {
+    1: ((1, 1.0, 1.0),),
+    2: ((2, 0.4, 1.0), (1, 0.6, 0.1)),
+    3: ((4, 2 / 7, 1.0), (2, 2 / 7, 0.5), (1, 3 / 7, 0.1)),
+}
+"""Coarse-to-fine schedules by number of levels: (reduction of the working size, share of
+the iterations, factor on the learning rate) per level, coarsest first."""
 
 
 @dataclass
@@ -35,12 +45,14 @@ class Settings:
     """How to optimize; see the module docstring."""
 
     mode: str = "local"
-    iterations: int = 300
+    iterations: int = 350
     lr: float = 0.1
     loss: str = "l1"
     tv_weight: float = 0.0
     vgg_weights: str | None = None
     """VGG-19 weights (safetensors) for the ``nst`` loss; default location when None."""
+    levels: int = 3
+    """Pyramid levels of :func:`pyramid` (1: every iteration at the working size)."""
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
@@ -53,6 +65,8 @@ class Settings:
             raise WiseError(f"the learning rate must be positive, got {self.lr}")
         if self.tv_weight < 0:
             raise WiseError(f"the total-variation weight must be at least 0, got {self.tv_weight}")
+        if self.levels not in PYRAMIDS:
+            raise WiseError(f"levels must be one of {', '.join(map(str, PYRAMIDS))}, got {self.levels}")
 
 
 @dataclass
@@ -147,6 +161,25 @@ def optimize(
     return outcome
 
 
+def pyramid(
+    settings: Settings, schedule: Sequence[tuple[int, float, float]] | None = None
+) -> tuple[tuple[int, Settings], ...]:
+    """The levels for :func:`optimize_coarse_to_fine`: ``settings.iterations`` split over
+    ``schedule`` (default ``PYRAMIDS[settings.levels]``), each level a copy of ``settings``
+    with its share of the iterations and its learning rate. The ``nst`` loss runs at the
+    working size only: its VGG features lose their meaning on small reduced copies."""
+    if schedule is None:
+        schedule = PYRAMIDS[1 if settings.loss == "nst" else settings.levels]
+    levels, left = [], settings.iterations
+    for index, (reduction, share, rate) in enumerate(schedule):
+        last = index == len(schedule) - 1
+        count = left if last else min(left - 1, max(1, round(settings.iterations * share)))
+        left -= count
+        if count > 0:
+            levels.append((reduction, replace(settings, iterations=count, lr=settings.lr * rate, levels=1)))
+    return tuple(levels)
+
+
 def optimize_coarse_to_fine(
     effect: Effect,
     content: torch.Tensor,
@@ -160,7 +193,8 @@ def optimize_coarse_to_fine(
 
     The effects are resolution-independent, so the parameters found on a small copy carry
     over; most iterations then cost a fraction of a full-resolution one. The last level
-    should have a reduction of 1. Returns the last level's outcome with the losses and time
+    should have a reduction of 1. ``on_step`` sees the iterations counted over all levels and
+    outputs at the level's size. Returns the last level's outcome with the losses and time
     of all levels.
     """
     params, losses, seconds = init, [], 0.0
@@ -173,7 +207,9 @@ def optimize_coarse_to_fine(
             level_target = torch.nn.functional.interpolate(target, size=size, mode="area")
         else:
             level_content, level_target = content, target
-        outcome = optimize(effect, level_content, level_target, params, settings, on_step)
+        done = len(losses)
+        level_step = None if on_step is None else lambda i, loss, output: on_step(done + i, loss, output)
+        outcome = optimize(effect, level_content, level_target, params, settings, level_step)
         params, seconds = outcome.params, seconds + outcome.seconds
         losses.extend(outcome.losses)
         if outcome.interrupted:

@@ -16,7 +16,7 @@ from wise.effects.base import Effect
 from wise.errors import WiseError
 from wise.io import atomic_path, read_image, tensor_to_image, write_image
 from wise.nst import stylize, stylize_gatys
-from wise.optimize.parametric import Outcome, Settings, optimize
+from wise.optimize.parametric import Outcome, Settings, optimize_coarse_to_fine, pyramid
 from wise.optimize.report import write_animation, write_report
 from wise.paramfile import load_params, save_params
 from wise.render import render
@@ -98,11 +98,12 @@ def run(
 
     def on_step(iteration: int, loss: float, output: torch.Tensor) -> None:
         if iteration % every == 0 or iteration == 1:
-            frames.append(tensor_to_image(output.cpu()))
+            frame = F.interpolate(output, size=size_hw, mode="nearest") if output.shape[-2:] != size_hw else output
+            frames.append(tensor_to_image(frame.cpu()))
         if iteration % PROGRESS_EVERY == 0 or iteration == settings.iterations:
             print(f"iteration {iteration}/{settings.iterations}  loss {loss:.5f}", file=out, flush=True)
 
-    outcome = optimize(effect, content, target, start_params.to(device), settings, on_step)
+    outcome = optimize_coarse_to_fine(effect, content, target, start_params.to(device), pyramid(settings), on_step)
     if outcome.interrupted:
         print(f"interrupted after {len(outcome.losses)} iterations; writing the state reached", file=out)
     assert outcome.result is not None
@@ -110,6 +111,7 @@ def run(
         "effect": effect_name,
         "mode": settings.mode,
         "iterations": len(outcome.losses),
+        "levels": settings.levels,
         "seconds": round(outcome.seconds, 3),
         "l1": metrics.l1(outcome.result, target),
         "psnr": metrics.psnr(outcome.result, target),
