@@ -126,6 +126,20 @@ def test_adam_on_bins_recovers_the_target_bin_count() -> None:
     assert losses[-1] < losses[0]
 
 
+@pytest.mark.parametrize(("start", "target_bins", "size"), [(9.0, 5.4, 32), (15.0, 2.46, 32), (3.0, 12.7, 160)])
+def test_adam_on_bins_recovers_a_fractional_bin_count(start: float, target_bins: float, size: int) -> None:
+    # size 160 scores the candidates on a subsample of the pixels
+    x = _rand(1, 3, size, size)
+    target = quantize(x, target_bins, 0.1)
+    bins = torch.tensor(start, dtype=DOUBLE, requires_grad=True)
+    optimizer = torch.optim.Adam([bins], lr=0.2)
+    for _ in range(150):
+        optimizer.zero_grad()
+        ((quantize(x, bins, 0.1) - target) ** 2).mean().backward()
+        optimizer.step()
+    assert abs(bins.item() - target_bins) < 0.1
+
+
 def test_bad_arguments() -> None:
     x = _rand(1, 3, 4, 4)
     with pytest.raises(WiseError):

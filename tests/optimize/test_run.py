@@ -40,7 +40,8 @@ def test_optimize_writes_every_output_and_apply_reproduces_the_result(images, tm
     scores = json.loads((out / "metrics.json").read_text())
     assert {"l1", "psnr", "ssim", "seconds", "iterations", "effect", "mode"} <= set(scores)
     assert scores["iterations"] == 6 and scores["effect"] == "cartoon" and scores["mode"] == "local"
-    assert scores["levels"] == 3
+    assert [level["reduction"] for level in scores["levels"]] == [4, 2, 1]
+    assert sum(level["iterations"] for level in scores["levels"]) == 6
     again = tmp_path / "again.png"
     content = images[0]
     assert main(["apply", "cartoon", str(content), "--params", str(out / "params.safetensors"), "-o", str(again)]) == 0

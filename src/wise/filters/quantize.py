@@ -8,6 +8,8 @@ with respect to its step count carries no useful information.
 
 from __future__ import annotations
 
+import math
+
 import torch
 
 from wise.errors import WiseError
@@ -17,9 +19,15 @@ MIN_BINS = 1.0
 """Fewest bins used; smaller values are clamped (one bin maps everything to its centre)."""
 SOFTNESS_FLOOR = 1e-4
 """Smallest softness of the tanh ramp; below it the ramp is a hard step in float precision."""
-CANDIDATE_RANGE = 6
-"""The numeric gradient tries the integer bin counts ``round(b) + k`` for
-``|k| <= CANDIDATE_RANGE`` (at least 1), besides ``b`` itself."""
+CANDIDATE_OFFSETS = (1 / 16, 1 / 8) + tuple(quarter / 4 for quarter in range(1, 25))
+"""The numeric gradient tries the bin counts ``b - o`` and ``b + o`` (at least 1) for these
+offsets ``o`` besides ``b`` itself: up to 6 bins away in quarter steps, because a count
+scores well only within about a quarter bin of the target (every boundary ``k / b`` moves
+with it), and finer steps near ``b`` to settle on a fractional count."""
+SCORE_SAMPLES = 16384
+"""Pixels per image that score the candidates (a regular subsample of larger images): the
+score is a count of signs, and scoring every candidate on every pixel would cost more than
+the rest of the backward pass."""
 
 
 def _last_level(bins: torch.Tensor) -> torch.Tensor:
@@ -53,17 +61,22 @@ def _levels(x: torch.Tensor, bins: torch.Tensor, softness: torch.Tensor | None) 
     return _hard_levels(x, bins) if softness is None else _soft_levels(x, bins, softness)
 
 
-def _candidate_steps() -> list[int | None]:
+def _candidate_steps() -> list[float | None]:
     # None stands for b itself, which scores 0 and wins when no bin count moves more
-    # outputs downhill than uphill; the rest are ordered by |k| so ties go to the nearest.
-    steps: list[int | None] = [None, 0]
-    for k in range(1, CANDIDATE_RANGE + 1):
-        steps += [-k, k]
+    # outputs downhill than uphill; the rest are ordered by size so ties go to the nearest.
+    steps: list[float | None] = [None]
+    for offset in CANDIDATE_OFFSETS:
+        steps += [-offset, offset]
     return steps
 
 
-def _candidate(bins: torch.Tensor, step: int | None) -> torch.Tensor:
-    return bins if step is None else (torch.round(bins) + step).clamp_min(MIN_BINS)
+def _candidate(bins: torch.Tensor, step: float | None) -> torch.Tensor:
+    return bins if step is None else (bins + step).clamp_min(MIN_BINS)
+
+
+def _subsample(tensor: torch.Tensor, stride: int) -> torch.Tensor:
+    # every stride-th pixel of an image or map; (B, C, 1, 1) parameters stay as they are
+    return tensor if tensor.shape[-1] == 1 else tensor[..., ::stride, ::stride]
 
 
 def _best_bins(
@@ -74,12 +87,16 @@ def _best_bins(
     ``r`` bins moves downhill (against their gradient) minus those it moves uphill."""
     steps = _candidate_steps()
     batch = grad.shape[0]
+    stride = max(1, math.ceil(math.sqrt(x.shape[-2] * x.shape[-1] / SCORE_SAMPLES)))
+    x, y, grad, sample_bins, softness = (
+        _subsample(t, stride) if t is not None else None for t in (x, y, grad, bins, softness)
+    )
     grad_sign = grad.sign().reshape(batch, -1, 1)
 
-    def score(step: int | None) -> torch.Tensor:
+    def score(step: float | None) -> torch.Tensor:
         if step is None:
             return grad.new_zeros(batch)  # y itself
-        levels = _levels(x, _candidate(bins, step), softness)
+        levels = _levels(x, _candidate(sample_bins, step), softness)
         moves = torch.sub(y, levels, out=levels).sign_()
         return torch.bmm(moves.reshape(batch, 1, -1), grad_sign).view(batch)  # per-image dot product
 
@@ -129,12 +146,14 @@ def quantize(image: torch.Tensor, bins: ParamLike, softness: ParamLike = 0.0) ->
     Gradients: the image gets the straight-through gradient (identity) in the hard variant
     and the true gradient in the soft one; ``softness`` its true gradient; ``bins`` the
     numeric gradient of the WISE supplement: with ``g = dL/dy``, ``b_hat`` maximises
-    ``f(r) = sum_i sign(y_i - q_r(x_i)) sign(g_i)`` over ``b`` itself and the integers
-    ``r = round(b) + k``, ``|k| <= CANDIDATE_RANGE`` (evaluated with the same quantizer and
-    softness), and ``dL/db = sum_i |g_i| (b - b_hat)`` (zero when no candidate beats ``b``).
-    A global or ``(B,)`` ``b`` sums over its image(s). A per-pixel map (local version)
-    scores the same ``k`` at every pixel (``r_i = round(b_i) + k``), picks the best ``k``
-    per image and gets ``|g_i| (b_i - r_i)`` per pixel (``|g|`` summed over channels).
+    ``f(r) = sum_i sign(y_i - q_r(x_i)) sign(g_i)`` over ``b`` itself and
+    ``r = b +- o`` for the offsets ``o`` of ``CANDIDATE_OFFSETS`` (evaluated with the same
+    quantizer and softness), and ``dL/db = sum_i |g_i| (b - b_hat)`` (zero when no candidate
+    beats ``b``). The paper leaves the candidates open; offsets from 1/16 to 6 bins reach a
+    distant count in a few steps and still settle on a fractional one. A global or ``(B,)``
+    ``b`` sums over its image(s). A per-pixel map (local version) scores the same offset at
+    every pixel (``r_i = b_i + o``), picks the best offset per image and gets
+    ``|g_i| (b_i - r_i)`` per pixel (``|g|`` summed over channels).
 
     Args:
         image: ``(B, C, H, W)`` values in [0, 1].

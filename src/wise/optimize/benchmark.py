@@ -20,7 +20,7 @@ from wise import effects, metrics
 from wise.effects.base import Effect
 from wise.errors import WiseError
 from wise.io import READ_FORMATS, atomic_path, read_image
-from wise.optimize.parametric import Settings, optimize_coarse_to_fine, pyramid
+from wise.optimize.parametric import Settings, describe_levels, optimize_coarse_to_fine, pyramid
 
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".webp", ".tif", ".tiff"}
 PSNR_CAP = 60.0
@@ -29,9 +29,10 @@ MIN_REFERENCE_CONTRAST = 0.05
 """Random parameters whose reference has a smaller standard deviation (a nearly blank image,
 which any parameters near the edge of a range reproduce) are drawn again."""
 MAX_DRAWS = 20
-LEVELS = ((4, 0.55, 1.0), (2, 0.25, 0.5), (1, 0.2, 0.25))
+LEVELS = ((8, 0.5, 1.0), (4, 0.25, 0.5), (2, 0.15, 0.25), (1, 0.1, 0.25))
 """Coarse-to-fine schedule: (reduction, share of the iterations, share of the learning rate).
-Global parameters carry over between resolutions, so most iterations run on small copies."""
+Global parameters carry over between resolutions, so most iterations run on small copies
+(64 px short side at the default 512 px)."""
 
 
 def schedule(iterations: int, lr: float, loss: str) -> tuple[tuple[int, Settings], ...]:
@@ -114,7 +115,7 @@ def recover(
         "mean_ssim": statistics.fmean(r["ssim"] for r in rows),
         "mean_psnr": statistics.fmean(r["psnr"] for r in rows),
         "psnr_cap": PSNR_CAP,
-        "levels": [{"reduction": r, "iterations": s.iterations, "lr": s.lr} for r, s in levels],
+        "levels": describe_levels(levels),
         "trials": rows,
     }
     print(f"mean SSIM {result['mean_ssim']:.4f}, mean PSNR {result['mean_psnr']:.2f} dB", file=out)

@@ -180,6 +180,11 @@ def pyramid(
     return tuple(levels)
 
 
+def describe_levels(levels: Sequence[tuple[int, Settings]]) -> list[dict[str, float]]:
+    """The levels of :func:`pyramid` as JSON-ready rows: reduction, iterations, learning rate."""
+    return [{"reduction": reduction, "iterations": level.iterations, "lr": level.lr} for reduction, level in levels]
+
+
 def optimize_coarse_to_fine(
     effect: Effect,
     content: torch.Tensor,

@@ -16,7 +16,7 @@ from wise.effects.base import Effect
 from wise.errors import WiseError
 from wise.io import atomic_path, read_image, tensor_to_image, write_image
 from wise.nst import stylize, stylize_gatys
-from wise.optimize.parametric import Outcome, Settings, optimize_coarse_to_fine, pyramid
+from wise.optimize.parametric import Outcome, Settings, describe_levels, optimize_coarse_to_fine, pyramid
 from wise.optimize.report import write_animation, write_report
 from wise.paramfile import load_params, save_params
 from wise.render import render
@@ -103,7 +103,8 @@ def run(
         if iteration % PROGRESS_EVERY == 0 or iteration == settings.iterations:
             print(f"iteration {iteration}/{settings.iterations}  loss {loss:.5f}", file=out, flush=True)
 
-    outcome = optimize_coarse_to_fine(effect, content, target, start_params.to(device), pyramid(settings), on_step)
+    levels = pyramid(settings)
+    outcome = optimize_coarse_to_fine(effect, content, target, start_params.to(device), levels, on_step)
     if outcome.interrupted:
         print(f"interrupted after {len(outcome.losses)} iterations; writing the state reached", file=out)
     assert outcome.result is not None
@@ -111,7 +112,7 @@ def run(
         "effect": effect_name,
         "mode": settings.mode,
         "iterations": len(outcome.losses),
-        "levels": settings.levels,
+        "levels": describe_levels(levels),
         "seconds": round(outcome.seconds, 3),
         "l1": metrics.l1(outcome.result, target),
         "psnr": metrics.psnr(outcome.result, target),
