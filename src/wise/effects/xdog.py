@@ -7,7 +7,14 @@ from typing import Mapping
 import torch
 
 from wise.effects.base import Effect, RenderContext
-from wise.effects.common import LUMINANCE_RANGE, detail_sigmas, edge_flow, flow_pipeline_halo, xdog_lines
+from wise.effects.common import (
+    LUMINANCE_RANGE,
+    colour_adjustments,
+    detail_sigmas,
+    edge_flow,
+    flow_pipeline_halo,
+    xdog_lines,
+)
 from wise.filters import adjust_color, oriented_bilateral, rgb_to_lab
 from wise.params import ParamSpec
 
@@ -67,17 +74,16 @@ class XDoG(Effect):
         sigmas = detail_sigmas(p["details"])
         samples = self.kernel_size
 
-        adjusted = self.recomputed(
-            adjust_color, image, brightness=p["brightness"], contrast=p["contrast"], saturation=p["saturation"]
-        )
+        adjusted = self.recomputed(adjust_color, image, **colour_adjustments(p))
         lab = self.recomputed(rgb_to_lab, adjusted)
         tangent = self.stage(edge_flow, lab[:, :1], sigmas["structure"], scale)
         abstracted = self.stage(
             oriented_bilateral, lab, tangent, sigmas["bilateral_spatial"], sigmas["bilateral_range"], samples, scale
         )
+        luminance = abstracted[:, :1] / LUMINANCE_RANGE
         lines = self.stage(
             xdog_lines,
-            abstracted[:, :1] / LUMINANCE_RANGE,
+            luminance,
             tangent,
             p["stroke_width"],
             p["contour"],
@@ -86,6 +92,5 @@ class XDoG(Effect):
             samples,
             scale,
         )
-        luminance = (abstracted[:, :1] / LUMINANCE_RANGE).clamp(0.0, 1.0)
-        shading = 1.0 - p["shading"] * (1.0 - luminance)
+        shading = 1.0 - p["shading"] * (1.0 - luminance.clamp(0.0, 1.0))
         return (lines * shading).expand(-1, 3, -1, -1)
