@@ -198,9 +198,10 @@ def optimize_coarse_to_fine(
 
     The effects are resolution-independent, so the parameters found on a small copy carry
     over; most iterations then cost a fraction of a full-resolution one. The last level
-    should have a reduction of 1. ``on_step`` sees the iterations counted over all levels and
-    outputs at the level's size. Returns the last level's outcome with the losses and time
-    of all levels.
+    should have a reduction of 1. Each level runs :func:`optimize` afresh, so the mask
+    smoothing and learning-rate decay schedules restart per level. ``on_step`` sees the
+    iterations counted over all levels and outputs at the level's size. Returns the last
+    level's outcome with the losses and time of all levels.
     """
     params, losses, seconds = init, [], 0.0
     outcome, mode = None, "global"
