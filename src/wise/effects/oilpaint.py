@@ -34,14 +34,17 @@ ABSTRACTION_FACTOR = 2
 """The colour abstraction runs at 1/2 resolution and is joint-bilaterally upsampled."""
 UPSAMPLING_RANGE = 12.0
 """Range sigma of the joint bilateral upsampling, in CIE Lab units."""
-BRISTLE_CELL = 0.8
-"""Cell size of the bristle noise before it is smeared into strokes (reference pixels)."""
+BRISTLE_CELL = 1.2
+"""Cell size of the bristle noise before it is smeared into strokes (reference pixels): coarse
+enough to be resolved at the reference resolution, so that the texture is the same at every
+resolution instead of aliased at 512 px and resolved at 2048 px."""
 BRISTLE_GAIN = 6.0
 """Scales the smeared noise to a paint height of roughly unit contrast."""
 EDGE_SIGMA = 1.0
 """Sigma of the flow-based Laplacian of Gaussian that enhances edges (reference pixels)."""
-MAX_STROKE_STEPS = 8
-"""Most line-integral steps per side for the strokes (long strokes take longer steps)."""
+MAX_STROKE_STEPS = 20
+"""Most line-integral steps per side for the strokes: the longest stroke (two sigma of 12
+reference pixels) is sampled every bristle cell, so no stroke breaks into dashes."""
 MAX_EDGE_STEPS = 6
 """Most samples per side of the edge-enhancing LoG."""
 LIGHT_DIRECTION = (-1.0, -1.0, 1.5)
@@ -118,6 +121,16 @@ class OilPaint(Effect):
         edge_reach = SUPPORT * 2 * EDGE_SIGMA * scale
         return math.ceil(flow_reach + max(texture_reach, abstraction_reach, edge_reach)) + 4
 
+    def paint_height(
+        self, tangent: torch.Tensor, stroke_length: torch.Tensor, brush_size: torch.Tensor, ctx: RenderContext
+    ) -> torch.Tensor:
+        """The brush texture ``(B, 1, H, W)``: bristle noise smeared along the strokes, then across."""
+        bristles = value_noise(tangent[:, :1], BRISTLE_CELL, self.seed, origin=ctx.origin, scale=ctx.scale) - 0.5
+        strokes = self.stage(flow_smoothing, bristles, tangent, stroke_length, MAX_STROKE_STEPS, ctx.scale)
+        across = gradient_direction(tangent)
+        grooves = self.stage(flow_smoothing, strokes, across, brush_size, MAX_STROKE_STEPS, ctx.scale)
+        return BRISTLE_GAIN * grooves
+
     def render(self, image: torch.Tensor, p: Mapping[str, torch.Tensor], ctx: RenderContext) -> torch.Tensor:
         sigmas = detail_sigmas(p["details"])
         scale = ctx.scale
@@ -141,12 +154,7 @@ class OilPaint(Effect):
         abstracted = self.stage(joint_bilateral_upsample, low_abstracted, lab, 1.0, UPSAMPLING_RANGE)
         colours = self.recomputed(lab_to_rgb, abstracted)
 
-        bristles = value_noise(lab[:, :1], BRISTLE_CELL, self.seed, octaves=2, origin=ctx.origin, scale=scale) - 0.5
-        strokes = self.stage(flow_smoothing, bristles, tangent, p["stroke_length"], MAX_STROKE_STEPS, scale)
-        grooves = self.stage(
-            flow_smoothing, strokes, gradient_direction(tangent), p["brush_size"], MAX_STROKE_STEPS, scale
-        )
-        height = BRISTLE_GAIN * grooves
+        height = self.paint_height(tangent, p["stroke_length"], p["brush_size"], ctx)
         lit = self.stage(
             bump_phong,
             colours,
