@@ -5,7 +5,7 @@ BIN := $(VENV)/bin
 # The CPU build of PyTorch; override, e.g. `make install TORCH_SPEC=torch` for a CUDA build.
 TORCH_SPEC ?= torch==2.13.0
 
-.PHONY: install demo test bench clean
+.PHONY: install demo test bench edit screenshot clean
 
 install: $(VENV)/.installed
 
@@ -20,6 +20,15 @@ demo: install
 
 test: install
 	$(BIN)/python -m pytest -q
+
+# The web editor on the demo's result (made first when missing): open http://127.0.0.1:8000/
+edit: install
+	test -f out/transfer/params.safetensors || $(BIN)/python -m wise.demo --out out
+	$(BIN)/wise edit out/astronaut.png --params out/transfer/params.safetensors
+
+# The README's picture of the editor, taken by the browser test.
+screenshot: install
+	WISE_EDITOR_SCREENSHOT=docs/editor.png $(BIN)/python -m pytest -q tests/editor/test_page.py
 
 bench: install
 	$(BIN)/python benchmarks/bench_effects.py --markdown

@@ -19,6 +19,7 @@ import numpy as np
 import torch
 
 from wise import __version__, effects
+from wise.editor.server import LOOPBACK, initial_session, serve
 from wise.effects.base import Effect
 from wise.errors import WiseError
 from wise.gallery import make_sheet
@@ -108,6 +109,16 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_optimization_options(transfer)
     transfer.set_defaults(func=_cmd_transfer)
+
+    edit = commands.add_parser("edit", help="the web editor: paint parameter masks and see the result")
+    edit.add_argument("image", nargs="?", metavar="IMAGE", help="content image to open")
+    start = edit.add_mutually_exclusive_group()
+    start.add_argument("--params", metavar="FILE", help="parameter file to edit (from wise optimize or the editor)")
+    start.add_argument("--effect", metavar="EFFECT", help="start from this effect's global values")
+    edit.add_argument("--preset", metavar="NAME", help="with --effect: start from this preset")
+    edit.add_argument("--host", default=LOOPBACK, help=f"address to listen on (default {LOOPBACK}: this machine only)")
+    edit.add_argument("--port", type=int, default=8000, help="port to listen on (default 8000)")
+    edit.set_defaults(func=_cmd_edit)
 
     bench = commands.add_parser("bench", help="benchmarks")
     benches = bench.add_subparsers(dest="bench", metavar="BENCHMARK", required=True)
@@ -306,6 +317,12 @@ def _cmd_transfer(args: argparse.Namespace, out: TextIO) -> int:
         method=args.nst,
         **options,
     )
+    return 0
+
+
+def _cmd_edit(args: argparse.Namespace, out: TextIO) -> int:
+    session = initial_session(args.image, args.params, args.effect, args.preset)
+    serve(session, args.host, args.port, out)
     return 0
 
 

@@ -67,6 +67,10 @@ def main() -> None:
     report = transfer_demo(args.out)
     print(f"Open the parametric style transfer report: {report}")
     print(
+        f"Paint its masks in the web editor: wise edit {args.out / 'astronaut.png'} "
+        f"--params {report.parent / 'params.safetensors'} (or: make edit)"
+    )
+    print(
         f"Re-render or edit with: wise apply xdog {args.out / 'astronaut.png'} "
         f"--params {args.out / 'xdog_portrait.safetensors'} -o {args.out / 'edited.png'} --set blackness=0.3"
     )

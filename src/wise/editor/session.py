@@ -1,0 +1,393 @@
+"""The state of one editing session: a content image, an effect and its parameter masks.
+
+Masks are edited in the normalized parameter space at their own resolution (that of an
+opened parameter file, else the preview's), so a saved file holds exactly what was painted
+and ``wise apply --params`` renders it at any resolution. Every edit bumps ``version``; a
+preview is rendered from a snapshot of the state, so edits never wait for a render.
+"""
+
+from __future__ import annotations
+
+import functools
+import io
+import tempfile
+import threading
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from PIL import Image, UnidentifiedImageError
+
+from wise import effects
+from wise.editor.brush import paint, stroke_weights
+from wise.effects.base import Effect
+from wise.errors import WiseError
+from wise.io import READ_FORMATS, read_image, write_image
+from wise.paramfile import describe, load_params, save_params
+from wise.params import resize_masks, to_real
+from wise.render import render
+
+PREVIEW_SHORT_SIDE = 512
+"""Short side of the preview and of the masks made for an image without a parameter file."""
+MAX_IMAGE_PIXELS = 40_000_000
+"""Largest content image accepted (pixels); the full-resolution export renders all of them."""
+MIN_IMAGE_SIDE = 8
+MAX_HISTORY = 100
+"""Most undo steps kept per session (each holds one parameter's mask)."""
+DEFAULT_EFFECT = "watercolor"
+OVERLAY_MIN_ALPHA = 0.3
+"""Opacity of the mask overlay at the middle of a parameter's range."""
+_SUFFIXES = {"PNG": ".png", "JPEG": ".jpg", "WEBP": ".webp", "TIFF": ".tif"}
+
+
+class NoContent(WiseError):
+    """An output was asked for before any image was opened."""
+
+
+@dataclass
+class Content:
+    """A content image at full resolution and its preview-size copy."""
+
+    name: str
+    image: torch.Tensor
+    preview: torch.Tensor
+
+    @property
+    def size(self) -> tuple[int, int]:
+        return int(self.image.shape[-2]), int(self.image.shape[-1])
+
+
+@dataclass
+class _Change:
+    """One undoable edit: a parameter's mask before and after it."""
+
+    index: int
+    before: torch.Tensor
+    after: torch.Tensor
+
+
+@dataclass
+class Snapshot:
+    """What a render needs, copied out of the session."""
+
+    version: int
+    effect: Effect
+    masks: torch.Tensor
+    content: Content | None
+
+
+def preview_size(size: tuple[int, int], short_side: int = PREVIEW_SHORT_SIDE) -> tuple[int, int]:
+    """(rows, columns) of an image of ``size`` reduced to ``short_side`` (never enlarged)."""
+    height, width = size
+    factor = min(1.0, short_side / min(height, width))
+    return max(1, round(height * factor)), max(1, round(width * factor))
+
+
+def decode_image(data: bytes, name: str = "image") -> Content:
+    """Decode uploaded image bytes (PNG, JPEG, WebP or TIFF) exactly as ``wise apply`` reads a file."""
+    if not data:
+        raise WiseError("the image upload is empty; choose a PNG, JPEG, WebP or TIFF file")
+    try:
+        with Image.open(io.BytesIO(data)) as probe:
+            fmt, (width, height) = probe.format, probe.size
+    except (UnidentifiedImageError, OSError, ValueError, SyntaxError, Image.DecompressionBombError):
+        supported = ", ".join(READ_FORMATS.values())
+        raise WiseError(f"{name}: not an image in a supported format ({supported})") from None
+    if fmt not in _SUFFIXES:
+        raise WiseError(f"{name}: unsupported image format {fmt}; supported: {', '.join(READ_FORMATS.values())}")
+    if width * height > MAX_IMAGE_PIXELS:
+        raise WiseError(
+            f"{name}: {width}x{height} pixels is more than the editor's limit of {MAX_IMAGE_PIXELS:,}; "
+            "reduce the image first"
+        )
+    with tempfile.TemporaryDirectory(prefix="wise-edit-") as folder:
+        path = Path(folder) / f"upload{_SUFFIXES[fmt]}"
+        path.write_bytes(data)
+        try:
+            image = read_image(path)
+        except WiseError as e:
+            raise WiseError(str(e).replace(str(path), name)) from None
+    if min(image.shape[-2:]) < MIN_IMAGE_SIDE:
+        raise WiseError(f"{name}: {width}x{height} pixels is too small; use at least {MIN_IMAGE_SIDE} on each side")
+    small = preview_size((image.shape[-2], image.shape[-1]))
+    preview = image if small == tuple(image.shape[-2:]) else F.interpolate(image, size=small, mode="area")
+    return Content(name=name, image=image, preview=preview)
+
+
+@functools.cache
+def presets_by_effect() -> dict[str, list[str]]:
+    """Every effect's preset names."""
+    return {name: sorted(effects.create(name).presets) for name in effects.available()}
+
+
+def png_bytes(image: torch.Tensor) -> bytes:
+    """A ``(1, 3, H, W)`` tensor in [0, 1] as PNG bytes, written exactly as :func:`write_image` writes."""
+    with tempfile.TemporaryDirectory(prefix="wise-edit-") as folder:
+        path = Path(folder) / "image.png"
+        write_image(image, path)
+        return path.read_bytes()
+
+
+def heat_map(values: torch.Tensor) -> bytes:
+    """A mask ``(h, w)`` in [0, 1] as an RGBA PNG: blue (low) through white to red (high), more
+    opaque towards either end of the range so that the result stays visible beneath."""
+    t = values.clamp(0.0, 1.0).numpy()
+    red = np.clip(2.0 * t, 0.0, 1.0)
+    blue = np.clip(2.0 - 2.0 * t, 0.0, 1.0)
+    green = 1.0 - np.abs(2.0 * t - 1.0)
+    alpha = OVERLAY_MIN_ALPHA + (1.0 - OVERLAY_MIN_ALPHA) * np.abs(2.0 * t - 1.0)
+    rgba = (np.stack([red, green, blue, alpha], axis=-1) * 255.0).round().astype(np.uint8)
+    buffer = io.BytesIO()
+    Image.fromarray(rgba).save(buffer, format="PNG")
+    return buffer.getvalue()
+
+
+@dataclass
+class EditorSession:
+    """One browser session's editing state; thread-safe."""
+
+    effect: Effect = field(default_factory=lambda: effects.create(DEFAULT_EFFECT))
+    preset: str | None = None
+    content: Content | None = None
+    masks: torch.Tensor = field(default_factory=lambda: torch.zeros(0))
+    opened: torch.Tensor = field(default_factory=lambda: torch.zeros(0))
+    masks_from_file: bool = False
+    version: int = 0
+    _undo: list[_Change] = field(default_factory=list)
+    _redo: list[_Change] = field(default_factory=list)
+    _lock: threading.RLock = field(default_factory=threading.RLock)
+
+    def __post_init__(self) -> None:
+        if self.masks.numel() == 0:
+            self._open_masks(self._preset_values())
+
+    def copy(self) -> EditorSession:
+        """A new session in this one's state, with its own effect, masks and empty history."""
+        with self._lock:
+            return EditorSession(
+                effect=effects.create(self.effect.name),
+                preset=self.preset,
+                content=self.content,
+                masks=self.masks.clone(),
+                opened=self.opened.clone(),
+                masks_from_file=self.masks_from_file,
+            )
+
+    # ----- opening -------------------------------------------------------------------------
+
+    def _mask_size(self) -> tuple[int, int]:
+        if self.content is not None:
+            return preview_size(self.content.size)
+        return (PREVIEW_SHORT_SIDE, PREVIEW_SHORT_SIDE)
+
+    def _preset_values(self) -> torch.Tensor:
+        if self.preset is None:
+            return self.effect.default_params()
+        return self.effect.preset(self.preset)
+
+    def _open_masks(self, params: torch.Tensor) -> None:
+        """Start editing ``params`` ((P,) global or (1, P, h, w) masks): history cleared."""
+        if params.dim() == 1:
+            params = params.view(1, -1, 1, 1).expand(1, -1, *self._mask_size())
+        self.masks = params.detach().to(torch.float32).clone().contiguous()
+        self.opened = self.masks.clone()
+        self._undo.clear()
+        self._redo.clear()
+        self.version += 1
+
+    def open_image(self, data: bytes, name: str = "image") -> None:
+        """Open a content image. Masks from a parameter file stay as they are (a render resizes
+        them); others are resized to the new preview size, which clears the history."""
+        content = decode_image(data, name)
+        with self._lock:
+            self.content = content
+            if not self.masks_from_file and tuple(self.masks.shape[-2:]) != self._mask_size():
+                opened = resize_masks(self.opened, self._mask_size())
+                self._open_masks(resize_masks(self.masks, self._mask_size()))
+                self.opened = opened
+            else:
+                self.version += 1
+
+    def open_params(self, data: bytes, name: str = "params") -> None:
+        """Open a parameter file (as written by ``wise optimize`` or this editor) for its effect."""
+        if not data:
+            raise WiseError("the parameter file upload is empty; choose a .safetensors file from wise optimize")
+        with tempfile.TemporaryDirectory(prefix="wise-edit-") as folder:
+            path = Path(folder) / "params.safetensors"
+            path.write_bytes(data)
+            try:
+                effect_name = describe(path).get("effect", "")
+                effect = effects.create(effect_name)
+                params = load_params(path, effect)
+            except WiseError as e:
+                raise WiseError(str(e).replace(str(path), name)) from None
+        with self._lock:
+            self.effect, self.preset = effect, None
+            self._open_masks(params[0] if params.dim() == 2 else params)
+            self.masks_from_file = params.dim() == 4
+
+    def choose_effect(self, name: str, preset: str | None = None) -> None:
+        """Switch to an effect (and preset): global values in fresh masks."""
+        effect = effects.create(name)
+        if preset is not None:
+            effect.preset(preset)  # unknown names fail before anything changes
+        with self._lock:
+            self.effect, self.preset = effect, preset
+            self.masks_from_file = False
+            self._open_masks(self._preset_values())
+
+    # ----- edits -----------------------------------------------------------------------------
+
+    def _index(self, param: str) -> int:
+        self.effect.spec(param)
+        return self.effect.param_names.index(param)
+
+    def _commit(self, index: int, after: torch.Tensor) -> None:
+        before = self.masks[0, index].clone()
+        if torch.equal(before, after):
+            return
+        self.masks[0, index] = after
+        self._undo.append(_Change(index, before, after.clone()))
+        del self._undo[:-MAX_HISTORY]
+        self._redo.clear()
+        self.version += 1
+
+    def set_global(self, param: str, value: float) -> None:
+        """Offset a parameter's whole mask so that its mean is ``value`` (real units)."""
+        with self._lock:
+            index = self._index(param)
+            spec = self.effect.param_specs[index]
+            if not spec.in_range(value):
+                raise WiseError(f"{param}: {value} is outside its range [{spec.min:g}, {spec.max:g}]")
+            mask = self.masks[0, index]
+            shifted = mask + (spec.to_normalized(value) - float(mask.mean()))
+            self._commit(index, shifted.clamp(-0.5, 0.5))
+
+    def stroke(
+        self,
+        param: str,
+        points: Sequence[Sequence[float]],
+        radius: float,
+        hardness: float,
+        mode: str,
+        amount: float = 0.25,
+        value: float | None = None,
+    ) -> None:
+        """Paint a stroke on a parameter's mask.
+
+        ``increase`` / ``decrease`` change it by ``amount`` (fraction of the range) at the
+        stroke's centre; ``set`` paints ``value`` (real units).
+        """
+        with self._lock:
+            index = self._index(param)
+            spec = self.effect.param_specs[index]
+            if mode == "set":
+                if value is None or not spec.in_range(value):
+                    raise WiseError(f"{param}: 'set' needs a value in [{spec.min:g}, {spec.max:g}], got {value}")
+                target = spec.to_normalized(value)
+            else:
+                if not 0.0 < amount <= 1.0:
+                    raise WiseError(f"brush amount must be above 0 and at most 1 (the whole range), got {amount}")
+                target = amount
+            weights = stroke_weights(tuple(self.masks.shape[-2:]), points, radius, hardness)
+            self._commit(index, paint(self.masks[0, index], weights, mode, target))
+
+    def reset(self, param: str) -> None:
+        """A parameter back to its values when the image, effect or file was opened."""
+        with self._lock:
+            index = self._index(param)
+            self._commit(index, self.opened[0, index].clone())
+
+    def undo(self) -> None:
+        with self._lock:
+            change = self._move(self._undo, self._redo, "undo")
+            self.masks[0, change.index] = change.before
+
+    def redo(self) -> None:
+        with self._lock:
+            change = self._move(self._redo, self._undo, "redo")
+            self.masks[0, change.index] = change.after
+
+    def _move(self, source: list[_Change], target: list[_Change], what: str) -> _Change:
+        if not source:
+            raise WiseError(f"nothing to {what}")
+        target.append(source.pop())
+        self.version += 1
+        return target[-1]
+
+    # ----- output ----------------------------------------------------------------------------
+
+    def snapshot(self) -> Snapshot:
+        with self._lock:
+            return Snapshot(self.version, self.effect, self.masks.clone(), self.content)
+
+    def _require_content(self, snapshot: Snapshot) -> Content:
+        if snapshot.content is None:
+            raise NoContent("no image is open yet: open an image first")
+        return snapshot.content
+
+    def render_preview(self, snapshot: Snapshot) -> bytes:
+        """The stylized preview of a snapshot as PNG."""
+        content = self._require_content(snapshot)
+        return png_bytes(render(snapshot.effect.eval(), content.preview, snapshot.masks))
+
+    def content_preview(self) -> bytes:
+        content = self._require_content(self.snapshot())
+        return png_bytes(content.preview)
+
+    def render_full(self, snapshot: Snapshot) -> bytes:
+        """The result at the content's full resolution as PNG: the pixels ``wise apply --params`` writes."""
+        content = self._require_content(snapshot)
+        return png_bytes(render(snapshot.effect.eval(), content.image, snapshot.masks))
+
+    def params_file(self) -> bytes:
+        """The masks as a parameter file (safetensors bytes)."""
+        snapshot = self.snapshot()
+        with tempfile.TemporaryDirectory(prefix="wise-edit-") as folder:
+            path = Path(folder) / "params.safetensors"
+            save_params(path, snapshot.effect, snapshot.masks)
+            return path.read_bytes()
+
+    def mask_image(self, param: str) -> bytes:
+        """A parameter's mask as a heat map over its declared range (PNG)."""
+        with self._lock:
+            mask = self.masks[0, self._index(param)].clone()
+        return heat_map(mask + 0.5)
+
+    def describe(self) -> dict[str, object]:
+        """The state as JSON-ready data for the page."""
+        with self._lock:
+            real = to_real(self.masks, self.effect.param_specs)[0]
+            params = [
+                {
+                    "name": spec.name,
+                    "description": spec.description,
+                    "min": spec.min,
+                    "max": spec.max,
+                    "default": spec.default,
+                    "mean": float(real[i].mean()),
+                    "low": float(real[i].min()),
+                    "high": float(real[i].max()),
+                }
+                for i, spec in enumerate(self.effect.param_specs)
+            ]
+            content = None
+            if self.content is not None:
+                height, width = self.content.size
+                preview_h, preview_w = self.content.preview.shape[-2:]
+                content = {"name": self.content.name, "width": width, "height": height}
+                content.update({"preview_width": int(preview_w), "preview_height": int(preview_h)})
+            return {
+                "version": self.version,
+                "effect": self.effect.name,
+                "preset": self.preset,
+                "effects": presets_by_effect(),
+                "content": content,
+                "mask_size": list(self.masks.shape[-2:]),
+                "params": params,
+                "can_undo": bool(self._undo),
+                "can_redo": bool(self._redo),
+            }
