@@ -164,7 +164,10 @@ def test_paint_undo_repaint_save_and_export(editor_url: str, browser, tmp_path: 
     assert _band(lower, (0.78, 0.82), (0.3, 0.7)).mean() > 10, "the second stroke was lost"
 
     page.check("#overlay")
-    page.wait_for_function("() => !document.getElementById('mask').hidden && document.getElementById('mask').complete")
+    page.wait_for_function(
+        "() => document.getElementById('mask').dataset.shown"
+        " === 'saturation@' + document.getElementById('status').dataset.target"
+    )
     shot = tmp_path / "editor.png"
     page.screenshot(path=str(shot))
     if os.environ.get(SCREENSHOT_ENV):

@@ -187,8 +187,9 @@ function updateMask() {
   const show = $("overlay").checked && editor.server?.content && editor.param;
   mask.hidden = !show;
   if (show) {
+    const shown = `${editor.param}@${editor.server.version}`;
     api(`/api/mask/${encodeURIComponent(editor.param)}`).then((r) => r.blob())
-      .then((b) => showImage(mask, b)).catch(showError);
+      .then((b) => showImage(mask, b)).then(() => { mask.dataset.shown = shown; }).catch(showError);
   }
 }
 
