@@ -22,6 +22,7 @@ def test_recover_benchmark_writes_per_trial_rows(tmp_path: Path, astronaut: torc
     assert len(result["trials"]) == 3 and {"mean_ssim", "mean_psnr"} <= set(result)
     assert [row["image"] for row in result["trials"]] == ["a.png", "b.png", "a.png"]
     assert 0.0 < result["mean_ssim"] <= 1.0
+    assert result["levels"][-1] == {"reduction": 1, "iterations": 1, "lr": 0.1 * 0.3, "crop": 128}
     assert "mean SSIM" in capsys.readouterr().out
 
 
@@ -41,11 +42,13 @@ def test_random_references_are_never_blank(astronaut: torch.Tensor) -> None:
         assert float(reference.std()) >= MIN_REFERENCE_CONTRAST
 
 
-def test_schedule_spends_most_iterations_on_small_copies() -> None:
-    levels = schedule(100, 0.1, "l2")
+def test_schedule_splits_iterations_between_small_copies_and_full_size_crops() -> None:
+    levels, crops = schedule(100, 0.1, "l2")
     assert [reduction for reduction, _ in levels][-1] == 1
-    assert sum(s.iterations for _, s in levels) == 100
+    assert sum(s.iterations for _, s in levels) + crops.iterations == 100
     assert levels[0][1].iterations > levels[-1][1].iterations and levels[-1][1].lr < levels[0][1].lr
+    assert crops.iterations == 50 and crops.lr < levels[0][1].lr and crops.mode == "global"
+    assert schedule(1, 0.1, "l2")[1] is None
 
 
 def test_an_exact_recovery_counts_as_the_psnr_cap(tmp_path: Path, astronaut: torch.Tensor, monkeypatch) -> None:

@@ -5,7 +5,7 @@ import torch.nn.functional as F
 import wise
 from wise.errors import WiseError
 from wise.optimize import Settings, optimize
-from wise.optimize.parametric import PYRAMIDS, optimize_coarse_to_fine, pyramid
+from wise.optimize.parametric import PYRAMIDS, optimize_coarse_to_fine, optimize_on_crops, pyramid
 
 
 @pytest.fixture(scope="module")
@@ -118,3 +118,28 @@ def test_masks_optimized_small_render_the_same_picture_four_times_larger(astrona
     reduced = F.interpolate(large, size=(64, 64), mode="area")
     assert metrics.l1(reduced, outcome.result) < 0.35 * metrics.l1(small, target)
     assert metrics.ssim(reduced, outcome.result) > 0.8
+
+
+def test_crops_recover_a_parameter_at_full_resolution(astronaut: torch.Tensor) -> None:
+    effect = wise.effects.create("xdog")
+    content = F.interpolate(astronaut, size=(96, 112), mode="area")
+    truth = effect.default_params()[None].clone()
+    index = effect.param_names.index("brightness")
+    truth[0, index] = 0.35
+    with torch.no_grad():
+        target = effect(content, truth)
+    settings = Settings(mode="global", iterations=60, lr=0.05, loss="l2")
+    outcome = optimize_on_crops(effect, content, target, effect.default_params(), settings, crop=48)
+    assert len(outcome.losses) == 60 and outcome.result.shape == content.shape
+    start_error = abs(float(effect.default_params()[index]) - 0.35)
+    assert abs(float(outcome.params[0, index]) - 0.35) < 0.3 * start_error
+    with torch.no_grad():
+        start = effect(content, effect.default_params()[None])
+    assert float((outcome.result - target).square().mean()) < 0.5 * float((start - target).square().mean())
+
+
+def test_crops_take_global_parameters_and_image_losses_only(content: torch.Tensor) -> None:
+    effect = wise.effects.create("xdog")
+    for settings in (Settings(mode="local", iterations=2), Settings(mode="global", iterations=2, loss="nst")):
+        with pytest.raises(WiseError, match="global|l1 or l2"):
+            optimize_on_crops(effect, content, content, effect.default_params(), settings)
