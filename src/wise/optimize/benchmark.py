@@ -49,7 +49,7 @@ CROP_LR = 0.3
 def schedule(iterations: int, lr: float, loss: str) -> tuple[tuple[tuple[int, Settings], ...], Settings | None]:
     """The levels of :data:`LEVELS` and the settings of the crop iterations (None when there are
     too few iterations for both) for ``iterations`` in all."""
-    coarse = max(1, round(iterations * COARSE_SHARE)) if iterations > 1 else iterations
+    coarse = max(1, round(iterations * COARSE_SHARE))
     levels = pyramid(Settings(mode="global", iterations=coarse, lr=lr, loss=loss), LEVELS)
     if coarse == iterations:
         return levels, None
