@@ -25,7 +25,7 @@ from wise import effects
 from wise.editor.brush import paint, stroke_weights
 from wise.effects.base import Effect
 from wise.errors import WiseError
-from wise.io import READ_FORMATS, read_image, write_image
+from wise.io import READ_FORMATS, read_image, tensor_to_image, write_image
 from wise.paramfile import describe, load_params, save_params
 from wise.params import resize_masks, to_real
 from wise.render import render
@@ -129,6 +129,14 @@ def png_bytes(image: torch.Tensor) -> bytes:
         path = Path(folder) / "image.png"
         write_image(image, path)
         return path.read_bytes()
+
+
+def preview_png(image: torch.Tensor) -> bytes:
+    """A ``(1, 3, H, W)`` tensor in [0, 1] as PNG bytes with the fastest compression: the same
+    8-bit pixels as :func:`png_bytes`, in about half the time, for previews sent every edit."""
+    buffer = io.BytesIO()
+    Image.fromarray(tensor_to_image(image)).save(buffer, format="PNG", compress_level=1)
+    return buffer.getvalue()
 
 
 def heat_map(values: torch.Tensor) -> bytes:
@@ -332,11 +340,11 @@ class EditorSession:
     def render_preview(self, snapshot: Snapshot) -> bytes:
         """The stylized preview of a snapshot as PNG."""
         content = self._require_content(snapshot)
-        return png_bytes(render(snapshot.effect.eval(), content.preview, snapshot.masks))
+        return preview_png(render(snapshot.effect.eval(), content.preview, snapshot.masks))
 
     def content_preview(self) -> bytes:
         content = self._require_content(self.snapshot())
-        return png_bytes(content.preview)
+        return preview_png(content.preview)
 
     def render_full(self, snapshot: Snapshot) -> bytes:
         """The result at the content's full resolution as PNG: the pixels ``wise apply --params`` writes."""
