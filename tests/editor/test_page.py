@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import base64
 import io
 import os
 import shutil
@@ -96,8 +97,6 @@ def _on_screen(page) -> np.ndarray:  # noqa: ANN001
         "img => { const c = document.createElement('canvas'); c.width = img.naturalWidth;"
         " c.height = img.naturalHeight; c.getContext('2d').drawImage(img, 0, 0); return c.toDataURL('image/png'); }",
     )
-    import base64
-
     raw = base64.b64decode(url.split(",", 1)[1])
     return np.asarray(Image.open(io.BytesIO(raw)).convert("RGB")).astype(np.int16)
 

@@ -8,13 +8,14 @@ preview is rendered from a snapshot of the state, so edits never wait for a rend
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import io
 import tempfile
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Iterator, Sequence
 
 import numpy as np
 import torch
@@ -79,6 +80,27 @@ class Snapshot:
     content: Content | None
 
 
+@contextlib.contextmanager
+def _as_file(data: bytes, file_name: str, shown_as: str) -> Iterator[Path]:
+    """``data`` as a file in a private temporary folder, for the readers that take paths (so an
+    upload is read exactly as ``wise apply`` reads a file); their errors name it ``shown_as``."""
+    with tempfile.TemporaryDirectory(prefix="wise-edit-") as folder:
+        path = Path(folder) / file_name
+        path.write_bytes(data)
+        try:
+            yield path
+        except WiseError as e:
+            raise WiseError(str(e).replace(str(path), shown_as)) from None
+
+
+def _written_bytes(file_name: str, write: Callable[[Path], None]) -> bytes:
+    """The bytes that ``write`` puts into a file (the writers that take paths)."""
+    with tempfile.TemporaryDirectory(prefix="wise-edit-") as folder:
+        path = Path(folder) / file_name
+        write(path)
+        return path.read_bytes()
+
+
 def preview_size(size: tuple[int, int], short_side: int = PREVIEW_SHORT_SIDE) -> tuple[int, int]:
     """(rows, columns) of an image of ``size`` reduced to ``short_side`` (never enlarged)."""
     height, width = size
@@ -103,13 +125,8 @@ def decode_image(data: bytes, name: str = "image") -> Content:
             f"{name}: {width}x{height} pixels is more than the editor's limit of {MAX_IMAGE_PIXELS:,}; "
             "reduce the image first"
         )
-    with tempfile.TemporaryDirectory(prefix="wise-edit-") as folder:
-        path = Path(folder) / f"upload{_SUFFIXES[fmt]}"
-        path.write_bytes(data)
-        try:
-            image = read_image(path)
-        except WiseError as e:
-            raise WiseError(str(e).replace(str(path), name)) from None
+    with _as_file(data, f"upload{_SUFFIXES[fmt]}", name) as path:
+        image = read_image(path)
     if min(image.shape[-2:]) < MIN_IMAGE_SIDE:
         raise WiseError(f"{name}: {width}x{height} pixels is too small; use at least {MIN_IMAGE_SIDE} on each side")
     small = preview_size((image.shape[-2], image.shape[-1]))
@@ -125,10 +142,7 @@ def presets_by_effect() -> dict[str, list[str]]:
 
 def png_bytes(image: torch.Tensor) -> bytes:
     """A ``(1, 3, H, W)`` tensor in [0, 1] as PNG bytes, written exactly as :func:`write_image` writes."""
-    with tempfile.TemporaryDirectory(prefix="wise-edit-") as folder:
-        path = Path(folder) / "image.png"
-        write_image(image, path)
-        return path.read_bytes()
+    return _written_bytes("image.png", lambda path: write_image(image, path))
 
 
 def preview_png(image: torch.Tensor) -> bytes:
@@ -223,15 +237,9 @@ class EditorSession:
         """Open a parameter file (as written by ``wise optimize`` or this editor) for its effect."""
         if not data:
             raise WiseError("the parameter file upload is empty; choose a .safetensors file from wise optimize")
-        with tempfile.TemporaryDirectory(prefix="wise-edit-") as folder:
-            path = Path(folder) / "params.safetensors"
-            path.write_bytes(data)
-            try:
-                effect_name = describe(path).get("effect", "")
-                effect = effects.create(effect_name)
-                params = load_params(path, effect)
-            except WiseError as e:
-                raise WiseError(str(e).replace(str(path), name)) from None
+        with _as_file(data, "params.safetensors", name) as path:
+            effect = effects.create(describe(path).get("effect", ""))
+            params = load_params(path, effect)
         with self._lock:
             self.effect, self.preset = effect, None
             self._open_masks(params[0] if params.dim() == 2 else params)
@@ -354,10 +362,7 @@ class EditorSession:
     def params_file(self) -> bytes:
         """The masks as a parameter file (safetensors bytes)."""
         snapshot = self.snapshot()
-        with tempfile.TemporaryDirectory(prefix="wise-edit-") as folder:
-            path = Path(folder) / "params.safetensors"
-            save_params(path, snapshot.effect, snapshot.masks)
-            return path.read_bytes()
+        return _written_bytes("params.safetensors", lambda path: save_params(path, snapshot.effect, snapshot.masks))
 
     def mask_image(self, param: str) -> bytes:
         """A parameter's mask as a heat map over its declared range (PNG)."""

@@ -281,7 +281,6 @@ function endStroke(event) {
   };
   if (mode === "set") stroke.value = Number($("brush-value").value);
   drawOverlay(pointerPosition(event));
-  editor.painting = null;
   edit(() => postJSON("/api/stroke", stroke));
 }
 
