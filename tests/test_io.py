@@ -2,7 +2,17 @@
 
 from __future__ import annotations
 
+import io
+import os
+import struct
+import sys
+import tempfile
+import time
+import warnings
+import zlib
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 import pytest
@@ -13,7 +23,7 @@ from skimage import data
 
 import wise.io as wio
 from wise.errors import WiseError
-from wise.io import image_to_tensor, read_image, tensor_to_image, write_image
+from wise.io import decode_image_bytes, image_to_tensor, read_image, tensor_to_image, write_image
 
 
 @pytest.fixture(scope="module")
@@ -146,7 +156,7 @@ def test_corrupt_16bit_colour_png_refused(tmp_path: Path) -> None:
     data = (tmp_path / "good.png").read_bytes()
     bad = tmp_path / "bad.png"
     bad.write_bytes(data[: len(data) // 2])
-    assert wio._needs_pypng(bad)
+    assert wio._needs_pypng(bad.read_bytes())
     expect_error(bad, "corrupt")
     flipped = bytearray(data)
     flipped[len(data) // 2] ^= 0xFF
@@ -308,3 +318,232 @@ def test_failed_write_leaves_no_file(tmp_path: Path, monkeypatch: pytest.MonkeyP
         write_image(torch.ones(1, 3, 8, 8), tmp_path / "new.png")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out.png"]
     assert target.read_bytes() == before
+
+
+# ----- limits checked from the header, before decoding -----------------------------------------------------------
+
+HUGE = (30000, 30000)
+HUGE_MESSAGE = (
+    ": 30000x30000 pixels (900.0 megapixels) is more than the limit of 64.0 megapixels; "
+    "reduce the image or raise the limit with --max-pixels or WISE_MAX_PIXELS"
+)
+
+
+def png_chunk(kind: bytes, data: bytes) -> bytes:
+    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+
+def png_bytes(width: int, height: int, depth: int = 8, colour: int = 2, idat: bytes | None = None) -> bytes:
+    """A PNG whose IHDR (with a valid CRC) claims ``width`` x ``height``, with little or no image data."""
+    ihdr = struct.pack(">IIBBBBB", width, height, depth, colour, 0, 0, 0)
+    data = zlib.compress(bytes(64)) if idat is None else idat
+    return wio._PNG_MAGIC + png_chunk(b"IHDR", ihdr) + png_chunk(b"IDAT", data) + png_chunk(b"IEND", b"")
+
+
+def jpeg_claiming(photo: np.ndarray, width: int, height: int) -> bytes:
+    buffer = io.BytesIO()
+    Image.fromarray(photo).save(buffer, format="JPEG")
+    data = bytearray(buffer.getvalue())
+    sof = data.index(b"\xff\xc0")
+    data[sof + 5 : sof + 9] = struct.pack(">HH", height, width)
+    return bytes(data)
+
+
+def tiff_claiming(data: bytes, width: int, height: int) -> bytes:
+    """A little-endian TIFF with the first page's ImageWidth and ImageLength tags replaced."""
+    out = bytearray(data)
+    assert out[:4] == b"II*\x00"
+    ifd = struct.unpack_from("<I", out, 4)[0]
+    for i in range(struct.unpack_from("<H", out, ifd)[0]):
+        entry = ifd + 2 + 12 * i
+        tag, kind = struct.unpack_from("<HH", out, entry)
+        if tag in (256, 257):
+            struct.pack_into("<H" if kind == 3 else "<I", out, entry + 8, width if tag == 256 else height)
+    return bytes(out)
+
+
+def webp_claiming(width: int, height: int) -> bytes:
+    vp8x = b"VP8X" + struct.pack("<I", 10) + bytes(4) + (width - 1).to_bytes(3, "little")
+    vp8x += (height - 1).to_bytes(3, "little")
+    return b"RIFF" + struct.pack("<I", 4 + len(vp8x)) + b"WEBP" + vp8x
+
+
+def tiff_bytes(array: np.ndarray, **options: object) -> bytes:
+    buffer = io.BytesIO()
+    tifffile.imwrite(buffer, array, **options)
+    return buffer.getvalue()
+
+
+@pytest.fixture
+def claiming_huge(photo: np.ndarray) -> dict[str, bytes]:
+    """Small files of every decoding path whose headers claim 30000 x 30000 pixels."""
+    rgb8 = tiff_bytes(photo, photometric="rgb")
+    float_rgb = tiff_bytes(photo.astype(np.float32) / 255, photometric="rgb")
+    return {
+        "png": png_bytes(*HUGE),
+        "png16": png_bytes(*HUGE, depth=16, colour=6),
+        "jpeg": jpeg_claiming(photo, *HUGE),
+        "webp": webp_claiming(16383, 16383),
+        "tiff": tiff_claiming(rgb8, *HUGE),
+        "float-tiff": tiff_claiming(float_rgb, *HUGE),
+    }
+
+
+def no_warnings(call: Callable[[], object]) -> object:
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = call()
+    assert [str(w.message) for w in caught] == []
+    return result
+
+
+def test_pixel_limit_is_checked_from_the_header(tmp_path: Path, claiming_huge: dict[str, bytes]) -> None:
+    for kind, content in claiming_huge.items():
+        path = tmp_path / f"{kind}.img"
+        path.write_bytes(content)
+        start = time.perf_counter()
+        for read in (lambda: read_image(path), lambda: decode_image_bytes(content, f"{kind}.upload")):
+            with pytest.raises(WiseError) as info:
+                no_warnings(read)
+            message = str(info.value)
+            if kind == "webp":
+                assert "16383x16383 pixels (268.4 megapixels) is more than the limit of 64.0 megapixels" in message
+            else:
+                assert message in (f"{path}{HUGE_MESSAGE}", f"{kind}.upload{HUGE_MESSAGE}")
+        assert time.perf_counter() - start < 2.0, kind
+    assert Image.MAX_IMAGE_PIXELS == PILLOW_LIMIT
+
+
+PILLOW_LIMIT = Image.MAX_IMAGE_PIXELS
+
+
+def test_the_pypng_and_tifffile_paths_check_the_header_too(tmp_path: Path, photo: np.ndarray) -> None:
+    data = png_bytes(300, 200, depth=16, colour=6)
+    with pytest.raises(WiseError, match=r"x: 300x200 pixels \(0\.06 megapixels\) is more than the limit of 1e-05"):
+        wio._pypng_array(io.BytesIO(data), data[:64], "x", 10)
+    tiff = tiff_bytes(ramp16()[..., None].repeat(3, axis=2), photometric="rgb")
+    with pytest.raises(WiseError, match=r"x: 40x32 pixels"):
+        wio._tifffile_array(io.BytesIO(tiff), "x", 10)
+
+
+def test_pillow_does_not_check_or_warn_first(tmp_path: Path) -> None:
+    # 10000 x 9000 is above Pillow's warning threshold; raising our limit must let it through to decoding
+    path = tmp_path / "big.png"
+    path.write_bytes(png_bytes(10000, 9000, depth=8, colour=0))
+    assert 10000 * 9000 > PILLOW_LIMIT
+    with pytest.raises(WiseError, match="corrupt or unreadable image data"):
+        no_warnings(lambda: read_image(path, max_pixels=100_000_000))
+    assert Image.MAX_IMAGE_PIXELS == PILLOW_LIMIT
+
+
+def test_limit_from_the_argument_and_the_environment(
+    tmp_path: Path, photo: np.ndarray, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    path = tmp_path / "a.png"
+    Image.fromarray(photo).save(path)  # 64 x 48 = 3072 pixels
+    assert wio.pixel_limit() == wio.DEFAULT_MAX_PIXELS == 64_000_000
+    assert read_image(path, max_pixels=3072).shape == (1, 3, 48, 64)
+    with pytest.raises(WiseError, match=r"64x48 pixels \(0\.0031 megapixels\) is more than the limit of 0\.0031"):
+        read_image(path, max_pixels=3071)
+    monkeypatch.setenv(wio.MAX_PIXELS_ENV, "3000")
+    assert wio.pixel_limit() == 3000
+    with pytest.raises(WiseError, match="WISE_MAX_PIXELS"):
+        read_image(path)
+    with pytest.raises(WiseError, match="limit of 0.003 megapixels"):
+        decode_image_bytes(path.read_bytes(), "a.png")
+    assert read_image(path, max_pixels=5000).shape == (1, 3, 48, 64)  # the argument wins
+    monkeypatch.setenv(wio.MAX_PIXELS_ENV, " ")
+    assert wio.pixel_limit() == wio.DEFAULT_MAX_PIXELS
+    for bad in ("abc", "0", "-5", "1e8", "2.5"):
+        monkeypatch.setenv(wio.MAX_PIXELS_ENV, bad)
+        with pytest.raises(WiseError) as info:
+            read_image(path)
+        assert str(info.value) == (
+            f"WISE_MAX_PIXELS={bad!r}: not a positive whole number of pixels; unset it or set e.g. 100000000"
+        )
+    monkeypatch.delenv(wio.MAX_PIXELS_ENV)
+    for bad in (0, -1, 2.5, True):
+        with pytest.raises(WiseError, match="pixel limit"):
+            read_image(path, max_pixels=bad)  # type: ignore[arg-type]
+
+
+def test_special_files_and_size_limit(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    os.mkfifo(tmp_path / "fifo.png")
+    for path, words in ((tmp_path / "fifo.png", "named pipe"), (Path("/dev/zero"), "character device")):
+        start = time.perf_counter()
+        expect_error(path, words, "not a regular file")
+        assert time.perf_counter() - start < 1.0
+    monkeypatch.setattr(wio, "MAX_IMAGE_BYTES", 100)
+    (tmp_path / "big.png").write_bytes(png_bytes(8, 8) + bytes(200))
+    expect_error(tmp_path / "big.png", "MB is more than the limit")
+    with pytest.raises(WiseError, match="upload.png: 0.0 MB is more than the limit"):
+        decode_image_bytes(png_bytes(8, 8) + bytes(200), "upload.png")
+
+
+def test_data_inflating_beyond_the_header_is_refused(tmp_path: Path) -> None:
+    bomb = png_bytes(8, 8, depth=16, colour=6, idat=zlib.compress(bytes(20_000_000)))
+    (tmp_path / "bomb.png").write_bytes(bomb)
+    expect_error(tmp_path / "bomb.png", "corrupt", "inflates to more than the image size")
+    rgb16 = np.stack([ramp16()] * 3, axis=-1)
+    shrunk = tiff_claiming(tiff_bytes(rgb16, photometric="rgb", compression="zlib"), 2, 2)
+    (tmp_path / "bomb.tif").write_bytes(shrunk)
+    expect_error(tmp_path / "bomb.tif", "corrupt", "inflates to more than the image size")
+
+
+def test_float_tiff_read_the_same_from_files_and_bytes(tmp_path: Path) -> None:
+    grey = (ramp16().astype(np.float32) / 65535) * 1.2 - 0.1  # outside [0, 1] at both ends
+    rgb = np.stack([grey, grey[::-1], 1 - grey], axis=-1)
+    for name, array, options in (("grey.tif", grey, {}), ("rgb.tif", rgb, {"photometric": "rgb"})):
+        tifffile.imwrite(tmp_path / name, array, **options)
+        from_file = no_warnings(lambda: read_image(tmp_path / name))
+        from_bytes = no_warnings(lambda: decode_image_bytes((tmp_path / name).read_bytes(), name))
+        assert isinstance(from_file, torch.Tensor) and torch.equal(from_file, from_bytes)
+        expected = np.clip(array if array.ndim == 3 else np.repeat(array[..., None], 3, axis=2), 0, 1)
+        assert float((from_file[0].permute(1, 2, 0) - torch.from_numpy(expected)).abs().max()) < 1e-6
+
+
+def test_bytes_messages_name_the_upload(tmp_path: Path, photo: np.ndarray) -> None:
+    buffer = io.BytesIO()
+    Image.fromarray(photo).save(buffer, format="PNG")
+    data = buffer.getvalue()
+    assert torch.equal(decode_image_bytes(data, "a.png"), image_to_tensor(photo))
+    assert torch.equal(decode_image_bytes(bytearray(data), "a.png"), image_to_tensor(photo))
+    for content, words in ((b"", "the file is empty"), (b"hello", "not an image"), (data[:200], "corrupt")):
+        with pytest.raises(WiseError) as info:
+            decode_image_bytes(content, "upload.png")
+        message = str(info.value)
+        assert message.startswith("upload.png: ") and words in message and tempfile.gettempdir() not in message
+    with pytest.raises(WiseError, match="bytes"):
+        decode_image_bytes("text", "upload.png")  # type: ignore[arg-type]
+    assert not [p for p in Path(tempfile.gettempdir()).glob("wise-image-*")]
+
+
+def test_reads_from_threads_leave_pillow_as_it_was(tmp_path: Path, photo: np.ndarray) -> None:
+    Image.fromarray(photo).save(tmp_path / "a.png")
+    (tmp_path / "big.png").write_bytes(png_bytes(*HUGE))
+
+    def read(i: int) -> str:
+        try:
+            return str(read_image(tmp_path / ("big.png" if i % 2 else "a.png")).shape)
+        except WiseError as e:
+            return "refused" if "30000x30000" in str(e) else str(e)
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with ThreadPoolExecutor(4) as pool:
+            results = list(pool.map(read, range(16)))
+    assert results == ["torch.Size([1, 3, 48, 64])", "refused"] * 8
+    assert caught == [] and Image.MAX_IMAGE_PIXELS == PILLOW_LIMIT
+
+
+def test_libtiff_errors_are_not_printed(tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
+    data = bytearray(tiff_bytes(np.full((8, 8, 3), 100, np.uint8), photometric="rgb", compression="zlib"))
+    ifd = struct.unpack_from("<I", data, 4)[0]
+    for i in range(struct.unpack_from("<H", data, ifd)[0]):
+        if struct.unpack_from("<H", data, ifd + 2 + 12 * i)[0] == 273:  # StripOffsets: now an unknown tag
+            struct.pack_into("<H", data, ifd + 2 + 12 * i, 65001)
+    (tmp_path / "no-strips.tif").write_bytes(bytes(data))
+    expect_error(tmp_path / "no-strips.tif", "corrupt")
+    assert capfd.readouterr() == ("", "")
+    print("stderr works again", file=sys.stderr)
+    assert capfd.readouterr().err == "stderr works again\n"

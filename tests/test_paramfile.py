@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import json
+import os
+import struct
+import time
+import warnings
 from pathlib import Path
 
 import pytest
@@ -10,9 +14,10 @@ import torch
 from safetensors import safe_open
 from safetensors.torch import save_file
 
+from wise import effects
 from wise.effects.base import Effect
-from wise.errors import WiseError
-from wise.paramfile import describe, load_params, save_params
+from wise.errors import WiseError, WiseWarning
+from wise.paramfile import RANGE_TOLERANCE, describe, effect_of, load_params, save_params
 from wise.params import ParamSpec
 
 
@@ -105,10 +110,10 @@ def test_reordered_names_are_accepted(tmp_path: Path, effect: Tiny) -> None:
         parameters=json.dumps(["gamma", "alpha", "beta"]),
     )
     assert torch.equal(load_params(path, effect), torch.tensor([[-0.2, 0.1, 0.3]]))
-    masks = torch.stack([torch.full((2, 2), v) for v in (0.4, 0.0, -0.4)])
+    masks = torch.stack([torch.full((2, 2), v) for v in (0.4, 15.0, 0.25)])
     path = write_raw(tmp_path / "m.safetensors", masks, parameters=json.dumps(["beta", "gamma", "alpha"]), space="real")
     loaded = load_params(path, effect)
-    assert torch.allclose(loaded[0, :, 0, 0], torch.tensor([-0.9, 0.1, -1.5]), atol=1e-6)
+    assert torch.allclose(loaded[0, :, 0, 0], torch.tensor([-0.25, 0.1, 0.0]), atol=1e-6)
 
 
 def refused(path: Path, effect: Effect, *words: str) -> str:
@@ -130,11 +135,49 @@ def test_refuses_unreadable_files(tmp_path: Path, effect: Tiny) -> None:
     refused(tmp_path / "short.safetensors", effect, "not a safetensors file")
 
 
+NO_METADATA = (
+    "not a wise parameter file (no wise metadata); "
+    "make one with wise optimize, the editor's Save params or wise.paramfile.save_params"
+)
+
+
 def test_refuses_foreign_safetensors(tmp_path: Path, effect: Tiny) -> None:
     save_file({"weight": torch.zeros(3)}, str(tmp_path / "model.safetensors"))
-    refused(tmp_path / "model.safetensors", effect, "not a wise parameter file")
+    assert refused(tmp_path / "model.safetensors", effect) == NO_METADATA
+    save_file({"params": torch.zeros(3)}, str(tmp_path / "other.safetensors"), metadata={"format": "gguf"})
+    refused(tmp_path / "other.safetensors", effect, "not a wise parameter file", "'gguf'", "wise optimize")
     write_raw(tmp_path / "v2.safetensors", torch.zeros(3), version="2")
     refused(tmp_path / "v2.safetensors", effect, "version")
+    write_raw(tmp_path / "e.safetensors", torch.zeros(3), effect=None)
+    refused(tmp_path / "e.safetensors", effect, "no effect in its metadata", "wise optimize")
+
+
+def test_effect_of(tmp_path: Path, effect: Tiny) -> None:
+    save_params(tmp_path / "o.safetensors", Other(), torch.zeros(3))
+    assert effect_of(tmp_path / "o.safetensors") == "other"
+    save_file({"weight": torch.zeros(3)}, str(tmp_path / "model.safetensors"))
+    with pytest.raises(WiseError) as info:
+        effect_of(tmp_path / "model.safetensors")
+    assert str(info.value) == f"{tmp_path / 'model.safetensors'}: {NO_METADATA}"
+    write_raw(tmp_path / "e.safetensors", torch.zeros(3), effect="")
+    with pytest.raises(WiseError, match="no effect in its metadata"):
+        effect_of(tmp_path / "e.safetensors")
+    write_raw(tmp_path / "v2.safetensors", torch.zeros(3), version="2")
+    with pytest.raises(WiseError, match="version"):
+        effect_of(tmp_path / "v2.safetensors")
+
+
+def test_special_files_and_huge_headers_are_refused_fast(tmp_path: Path, effect: Tiny) -> None:
+    fifo = tmp_path / "fifo.safetensors"
+    os.mkfifo(fifo)
+    huge = tmp_path / "huge.safetensors"
+    huge.write_bytes(struct.pack("<Q", 2**63) + b"{}")
+    for path, words in ((Path("/dev/zero"), "character device"), (fifo, "named pipe"), (huge, "header length")):
+        for read in (lambda p: load_params(p, effect), effect_of, describe):
+            start = time.perf_counter()
+            with pytest.raises(WiseError, match=words):
+                read(path)
+            assert time.perf_counter() - start < 1.0
 
 
 def test_refuses_other_effect(tmp_path: Path, effect: Tiny) -> None:
@@ -214,3 +257,52 @@ def test_failed_save_leaves_no_file(tmp_path: Path, effect: Tiny, monkeypatch: p
     with pytest.raises(WiseError, match="No space left"):
         save_params(tmp_path / "p.safetensors", effect, torch.zeros(3))
     assert list(tmp_path.iterdir()) == []
+
+
+def test_out_of_range_values_are_clamped_with_a_note(tmp_path: Path, effect: Tiny) -> None:
+    masks = torch.zeros(3, 2, 2)
+    masks[0, 0] = 0.7  # two values of alpha above the range
+    masks[0, 1, 0] = -0.6
+    masks[2, 1, 1] = -40.0
+    masks[1] = 0.5 + RANGE_TOLERANCE / 2  # rounding: clamped without a note
+    path = write_raw(tmp_path / "m.safetensors", masks)
+    notes: list[str] = []
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        loaded = load_params(path, effect, notes=notes)
+    assert caught == []
+    assert notes == [
+        f"{path}: 3 values of alpha outside [0, 1] and 1 value of gamma outside [10, 20] clamped to their ranges"
+    ]
+    assert float(loaded.min()) == -0.5 and float(loaded.max()) == 0.5
+    expected = masks.clamp(-0.5, 0.5)
+    assert torch.equal(loaded[0], expected)
+
+
+def test_out_of_range_values_warn_without_notes(tmp_path: Path, effect: Tiny) -> None:
+    path = write_raw(tmp_path / "real.safetensors", torch.tensor([1e30, 0.0, 15.0]), space="real")
+    with pytest.warns(WiseWarning) as caught:
+        loaded = load_params(path, effect)
+    assert [str(w.message) for w in caught] == [f"{path}: 1 value of alpha outside [0, 1] clamped to the range"]
+    assert caught[0].filename == __file__  # points at the caller
+    assert torch.equal(loaded, torch.tensor([[0.5, 0.0, 0.0]]))
+    notes: list[str] = []
+    in_range = write_raw(tmp_path / "ok.safetensors", torch.tensor([0.5, -0.5, 0.0]))
+    assert torch.equal(load_params(in_range, effect, notes=notes), torch.tensor([[0.5, -0.5, 0.0]])) and notes == []
+
+
+def test_a_preset_outside_its_range_loads_as_authored_and_bounds_the_span(tmp_path: Path) -> None:
+    xdog = effects.create("xdog")
+    path = tmp_path / "sketch.safetensors"
+    save_params(path, xdog, xdog.preset("sketch"))
+    notes: list[str] = []
+    assert torch.equal(load_params(path, xdog, notes=notes)[0], xdog.preset("sketch")) and notes == []
+    index = xdog.param_names.index("stroke_width")
+    below = xdog.preset("sketch").clone()
+    below[index] -= 0.1
+    save_params(path, xdog, below)
+    loaded = load_params(path, xdog, notes=notes)
+    authored = xdog.presets["sketch"]["stroke_width"]
+    spec = xdog.spec("stroke_width")
+    assert notes == [f"{path}: 1 value of stroke_width outside [{authored:g}, {spec.max:g}] clamped to the range"]
+    assert float(loaded[0, index]) == pytest.approx(float(xdog.preset("sketch")[index]))

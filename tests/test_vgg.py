@@ -1,13 +1,18 @@
+import json
+import os
+import struct
 from pathlib import Path
 
 import pytest
 import torch
 from safetensors.torch import save_file
 
+import wise.files
 from wise.cli import main
 from wise.errors import WiseError
+from wise.files import DTYPE_BYTES
 from wise.io import write_image
-from wise.vgg import StyleLoss, VGG19Features, load_vgg19
+from wise.vgg import StyleLoss, VGG19Features, expected_shapes, load_vgg19, weights_file
 
 
 @pytest.fixture(scope="module")
@@ -66,3 +71,64 @@ def test_transfer_by_gatys_with_user_weights(weights: Path, tmp_path: Path, caps
     assert (out / "target.png").exists()
     assert main([*base, "-o", str(tmp_path / "n"), "--vgg-weights", str(tmp_path / "none.safetensors")]) == 2
     assert "VGG-19 weights not found" in capsys.readouterr().err and not (tmp_path / "n").exists()
+
+
+def sparse_weights(path: Path, shapes: dict[str, tuple[int, ...]], dtype: str = "F32") -> Path:
+    """A safetensors file with these tensor shapes whose data is a hole (written without the bytes)."""
+    header, offset = {}, 0
+    for key, shape in shapes.items():
+        size = DTYPE_BYTES[dtype] * int(torch.Size(shape).numel())
+        header[key] = {"dtype": dtype, "shape": list(shape), "data_offsets": [offset, offset + size]}
+        offset += size
+    text = json.dumps(header).encode()
+    with path.open("wb") as f:
+        f.write(struct.pack("<Q", len(text)) + text)
+        f.truncate(8 + len(text) + offset)
+    return path
+
+
+@pytest.fixture
+def no_data_reads(monkeypatch: pytest.MonkeyPatch) -> None:
+    def refuse(data: bytes) -> dict[str, torch.Tensor]:
+        raise AssertionError("tensor data was read")
+
+    monkeypatch.setattr(wise.files, "_st_load", refuse)
+
+
+def test_the_header_check_refuses_wrong_files_without_loading(tmp_path: Path, no_data_reads: None) -> None:
+    shapes = expected_shapes()
+    assert weights_file(sparse_weights(tmp_path / "ok.safetensors", shapes)) == tmp_path / "ok.safetensors"
+    wrong = sparse_weights(tmp_path / "wrong.safetensors", {**shapes, "features.0.weight": (64, 3, 5, 5)})
+    with pytest.raises(WiseError) as info:
+        weights_file(wrong)
+    message = str(info.value)
+    assert "features.0.weight is [64, 3, 5, 5], expected [64, 3, 3, 3]" in message and "--vgg-weights" in message
+    partial = {k: v for k, v in shapes.items() if not k.startswith("features.34")}
+    with pytest.raises(WiseError, match=r"not a VGG-19 state dict; missing features\.34\.weight, features\.34\.bias;"):
+        weights_file(sparse_weights(tmp_path / "partial.safetensors", partial))
+    with pytest.raises(WiseError, match="floating point"):
+        weights_file(sparse_weights(tmp_path / "int.safetensors", shapes, dtype="I32"))
+    with pytest.raises(WiseError, match="not a safetensors file"):
+        (tmp_path / "text.safetensors").write_text("weights")
+        weights_file(tmp_path / "text.safetensors")
+    with pytest.raises(WiseError, match="character device"):
+        os.symlink("/dev/zero", tmp_path / "zero.safetensors")
+        weights_file(tmp_path / "zero.safetensors")
+
+
+def test_only_the_features_are_read(tmp_path: Path, weights: Path) -> None:
+    state = {k: v.contiguous() for k, v in VGG19Features().state_dict().items()}
+    path = tmp_path / "full.safetensors"
+    save_file({**state, "classifier.0.bias": torch.zeros(4096)}, str(path))
+    model = load_vgg19(path)
+    assert torch.equal(model.features[0].weight, state["features.0.weight"])
+
+
+def test_a_wrong_weights_file_fails_before_any_work(tmp_path: Path, capsys) -> None:
+    content = tmp_path / "c.png"
+    write_image(torch.rand(1, 3, 32, 32), content)
+    wrong = sparse_weights(tmp_path / "wrong.safetensors", {"features.0.weight": (64, 3, 3, 3)})
+    out = tmp_path / "o"
+    args = ["optimize", "xdog", "--content", str(content), "--target", str(content), "-o", str(out), "--loss", "nst"]
+    assert main([*args, "--vgg-weights", str(wrong)]) == 2
+    assert "not a VGG-19 state dict" in capsys.readouterr().err and not out.exists()

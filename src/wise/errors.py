@@ -1,4 +1,4 @@
-"""Errors that carry a one-line message meant for the user."""
+"""Errors and warnings that carry a one-line message meant for the user."""
 
 
 class WiseError(ValueError):
@@ -6,3 +6,12 @@ class WiseError(ValueError):
 
     The command line prints the message as one line and exits with code 2.
     """
+
+
+class WiseWarning(UserWarning):
+    """A warning meant for the user, printed by the command line as one line."""
+
+
+def size_text(width: int, height: int) -> str:
+    """An image size as ``"96x120"``: width x height, in every message that states one."""
+    return f"{width}x{height}"

@@ -10,28 +10,44 @@ global parameters or ``(P, h, w)`` for local masks, and string metadata:
 ``space``       ``"normalized"`` or ``"real"`` (real units)
 ``kind``        ``"global"`` or ``"local"``
 ``ranges``      JSON list of ``[min, max]`` per parameter, for information
+
+Files are read through :func:`wise.files.read_safetensors`: only regular files of
+at most :data:`~wise.files.MAX_PARAMS_BYTES`, with the header checked before any
+tensor data is read.
+
+Value policy on loading: NaN or infinite values are refused. Finite values outside
+the effect's declared range are clamped to it, with one warning per file naming the
+parameters, how many values were out of range and the range in real units. The
+range a file may hold is widened to the presets that deliberately sit outside the
+declared range (the XDoG ``sketch`` preset has ``stroke_width`` 0.2 < 0.3), so a
+saved preset loads and renders as authored (:func:`accepted_span`). Deviations below
+:data:`RANGE_TOLERANCE` (rounding in a real-space file) are clamped without a
+warning.
 """
 
 from __future__ import annotations
 
 import json
+import warnings
 from pathlib import Path
-from typing import Any
 
 import torch
-from safetensors import SafetensorError
-from safetensors.torch import load as _st_load
 from safetensors.torch import save as _st_save
 
 from wise import params as P
 from wise.effects.base import Effect
-from wise.errors import WiseError
+from wise.errors import WiseError, WiseWarning
+from wise.files import MAX_PARAMS_BYTES, read_safetensors, read_safetensors_header
 from wise.io import PathLike, atomic_path
 
 FORMAT = "wise-params"
 VERSION = "1"
 SPACES = ("normalized", "real")
 TENSOR_KEY = "params"
+WHAT = "parameter file"
+RANGE_TOLERANCE = 1e-4
+"""Normalized distance outside [-0.5, 0.5] clamped without a warning (float rounding of real-space files)."""
+MAKE_ONE = "make one with wise optimize, the editor's Save params or wise.paramfile.save_params"
 
 
 def _as_batched(params: torch.Tensor, effect: Effect) -> torch.Tensor:
@@ -88,23 +104,56 @@ def save_params(path: PathLike, effect: Effect, params: torch.Tensor, space: str
         raise WiseError(f"{path}: cannot write the parameter file ({e.strerror or e})") from None
 
 
-def _read(path: Path) -> tuple[dict[str, torch.Tensor], dict[str, str]]:
-    if not path.exists():
-        raise WiseError(f"{path}: no such file")
-    if path.is_dir():
-        raise WiseError(f"{path}: is a directory, not a parameter file")
-    try:
-        data = path.read_bytes()
-    except OSError as e:
-        raise WiseError(f"{path}: cannot read the file ({e.strerror or e})") from None
-    try:
-        tensors = _st_load(data)
-        header_len = int.from_bytes(data[:8], "little")
-        header: dict[str, Any] = json.loads(data[8 : 8 + header_len])
-    except (SafetensorError, ValueError, RuntimeError, TypeError, OverflowError):
-        raise WiseError(f"{path}: not a safetensors file or unreadable") from None
-    metadata = header.get("__metadata__") or {}
-    return tensors, metadata if isinstance(metadata, dict) else {}
+def _check_format(path: Path, metadata: dict[str, str]) -> None:
+    """Refuse a file without wise metadata or of another format or version."""
+    fmt = metadata.get("format")
+    if fmt is None:
+        raise WiseError(f"{path}: not a wise parameter file (no wise metadata); {MAKE_ONE}")
+    if fmt != FORMAT:
+        raise WiseError(f"{path}: not a wise parameter file (format {fmt!r}, expected {FORMAT!r}); {MAKE_ONE}")
+    if metadata.get("version") != VERSION:
+        raise WiseError(
+            f"{path}: unsupported wise parameter file version {metadata.get('version')!r}; expected {VERSION!r}"
+        )
+
+
+def _effect_name(path: Path, metadata: dict[str, str]) -> str:
+    name = metadata.get("effect")
+    if not name:
+        raise WiseError(f"{path}: not a wise parameter file (no effect in its metadata); {MAKE_ONE}")
+    return name
+
+
+def accepted_span(effect: Effect) -> tuple[torch.Tensor, torch.Tensor]:
+    """Per parameter, the normalized values a file may hold: the declared range [-0.5, 0.5],
+    widened to the presets that deliberately sit outside it (so a saved preset loads as authored)."""
+    low = torch.full((len(effect.param_specs),), P.NORMALIZED_MIN)
+    high = torch.full((len(effect.param_specs),), P.NORMALIZED_MAX)
+    for name in effect.presets:
+        preset = effect.preset(name).to(torch.float32)
+        low, high = torch.minimum(low, preset), torch.maximum(high, preset)
+    return low, high
+
+
+def _clamp(values: torch.Tensor, effect: Effect, path: Path) -> tuple[torch.Tensor, str | None]:
+    """Normalized ``(1, P[, h, w])`` values clamped to :func:`accepted_span`, and the warning
+    text if any were outside it."""
+    low, high = accepted_span(effect)
+    shape = (1, -1) + (1,) * (values.dim() - 2)
+    clamped = torch.maximum(torch.minimum(values, high.view(shape)), low.view(shape))
+    parts = []
+    for i, spec in enumerate(effect.param_specs):
+        outside = (values[0, i] < low[i] - RANGE_TOLERANCE) | (values[0, i] > high[i] + RANGE_TOLERANCE)
+        count = int(outside.sum())
+        if count:
+            real_low, real_high = spec.to_real(float(low[i])), spec.to_real(float(high[i]))
+            values_text = f"{count} value{'s' if count != 1 else ''}"
+            parts.append(f"{values_text} of {spec.name} outside [{real_low:g}, {real_high:g}]")
+    if not parts:
+        return clamped, None
+    listed = ", ".join(parts[:-1]) + " and " + parts[-1] if len(parts) > 1 else parts[0]
+    ranges = "the range" if len(parts) == 1 else "their ranges"
+    return clamped, f"{path}: {listed} clamped to {ranges}"
 
 
 def _parse_names(path: Path, metadata: dict[str, str]) -> list[str]:
@@ -120,21 +169,19 @@ def _parse_names(path: Path, metadata: dict[str, str]) -> list[str]:
     return names
 
 
-def load_params(path: PathLike, effect: Effect) -> torch.Tensor:
+def load_params(path: PathLike, effect: Effect, notes: list[str] | None = None) -> torch.Tensor:
     """Load a parameter file for ``effect`` as normalized ``(1, P)`` or ``(1, P, h, w)``.
 
     Parameters are reordered by name to the effect's order and real-space files
-    are converted. Raises :class:`WiseError` with a one-line reason otherwise.
+    are converted. Values outside the declared ranges are clamped (see the module
+    docstring): the warning text is appended to ``notes`` when it is a list, and
+    otherwise emitted as a :class:`WiseWarning`. Raises :class:`WiseError` with a
+    one-line reason for anything else.
     """
     path = Path(path)
-    tensors, metadata = _read(path)
-    if metadata.get("format") != FORMAT:
-        raise WiseError(f"{path}: not a wise parameter file (no 'format: {FORMAT}' metadata)")
-    if metadata.get("version") != VERSION:
-        raise WiseError(
-            f"{path}: unsupported wise parameter file version {metadata.get('version')!r}; expected {VERSION!r}"
-        )
-    made_for = metadata.get("effect")
+    tensors, metadata = read_safetensors(path, WHAT, MAX_PARAMS_BYTES)
+    _check_format(path, metadata)
+    made_for = _effect_name(path, metadata)
     if made_for != effect.name:
         raise WiseError(f"{path}: parameters made for effect {made_for!r}, not for {effect.name!r}")
     names = _parse_names(path, metadata)
@@ -172,13 +219,27 @@ def load_params(path: PathLike, effect: Effect) -> torch.Tensor:
     if space == "real":
         values = P.to_normalized(values, effect.param_specs)
         _check_finite(values[0], expected, str(path))
+    values, note = _clamp(values, effect, path)
+    if note is not None:
+        if notes is not None:
+            notes.append(note)
+        else:
+            warnings.warn(note, WiseWarning, stacklevel=2)
     return values.contiguous()
+
+
+def effect_of(path: PathLike) -> str:
+    """The name of the effect a parameter file was made for, read from its checked header."""
+    path = Path(path)
+    _, metadata = read_safetensors_header(path, WHAT, MAX_PARAMS_BYTES)
+    _check_format(path, metadata)
+    return _effect_name(path, metadata)
 
 
 def describe(path: PathLike) -> dict[str, str]:
     """The metadata of a parameter file (without validating it against an effect)."""
-    _, metadata = _read(Path(path))
+    _, metadata = read_safetensors_header(Path(path), WHAT, MAX_PARAMS_BYTES)
     return dict(metadata)
 
 
-__all__ = ["save_params", "load_params", "describe", "FORMAT", "VERSION"]
+__all__ = ["save_params", "load_params", "effect_of", "describe", "FORMAT", "VERSION", "RANGE_TOLERANCE"]

@@ -15,6 +15,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from wise.errors import WiseError
+from wise.files import MAX_MODEL_BYTES, read_safetensors, read_safetensors_header
 
 DEFAULT_WEIGHTS = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "wise" / "vgg19.safetensors"
 CHANNELS = (
@@ -45,6 +46,9 @@ IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
 STYLE_WEIGHT = 1e3
 """Weight of the Gram-matrix style term against the content term."""
+WHAT = "VGG-19 weights"
+FLOAT_DTYPES = ("F16", "BF16", "F32", "F64")
+PASS_WEIGHTS = "pass --vgg-weights FILE (a safetensors file of torchvision's vgg19 state dict)"
 
 
 def _layer_names() -> list[tuple[int, str]]:
@@ -93,36 +97,57 @@ class VGG19Features(nn.Module):
         return found
 
 
+def expected_shapes() -> dict[str, tuple[int, ...]]:
+    """The shape of every ``features.<i>.weight`` / ``.bias`` tensor of VGG-19, by key."""
+    shapes: dict[str, tuple[int, ...]] = {}
+    index, in_channels = 0, 3
+    for item in CHANNELS:
+        if item == "pool":
+            index += 1
+            continue
+        out_channels = int(item)
+        shapes[f"features.{index}.weight"] = (out_channels, in_channels, 3, 3)
+        shapes[f"features.{index}.bias"] = (out_channels,)
+        in_channels, index = out_channels, index + 2
+    return shapes
+
+
 def weights_file(path: str | os.PathLike[str] | None = None) -> Path:
-    """The VGG-19 weights file to use; refuses a missing file or one that is not safetensors."""
+    """The VGG-19 weights file to use, once its header shows every VGG-19 tensor with the right shape.
+
+    Refuses a missing file, a pickled file, anything that is not safetensors and a state dict of another
+    network, without reading the tensor data, so that a wrong file fails before any work.
+    """
     file = Path(path) if path is not None else DEFAULT_WEIGHTS
-    if not file.is_file():
-        raise WiseError(
-            f"VGG-19 weights not found at {file}; pass --vgg-weights FILE (a safetensors file of "
-            f"torchvision's vgg19 state dict) or put that file at {DEFAULT_WEIGHTS}"
-        )
+    if not os.path.lexists(file):
+        raise WiseError(f"VGG-19 weights not found at {file}; {PASS_WEIGHTS} or put that file at {DEFAULT_WEIGHTS}")
     if file.suffix != ".safetensors":
         raise WiseError(f"{file}: VGG weights must be a .safetensors file (pickled .pth files are not loaded)")
+    entries, _ = read_safetensors_header(file, WHAT, MAX_MODEL_BYTES)
+    shapes = expected_shapes()
+    missing = [key for key in shapes if key not in entries]
+    if missing:
+        more = " and more" if len(missing) > 3 else ""
+        raise WiseError(f"{file}: not a VGG-19 state dict; missing {', '.join(missing[:3])}{more}; {PASS_WEIGHTS}")
+    for key, shape in shapes.items():
+        entry = entries[key]
+        if entry.shape != shape:
+            raise WiseError(
+                f"{file}: weights of the wrong shape for VGG-19 ({key} is {list(entry.shape)}, "
+                f"expected {list(shape)}); {PASS_WEIGHTS}"
+            )
+        if entry.dtype not in FLOAT_DTYPES:
+            raise WiseError(f"{file}: VGG-19 weights must be floating point ({key} is {entry.dtype}); {PASS_WEIGHTS}")
     return file
 
 
 def load_vgg19(path: str | os.PathLike[str] | None = None) -> VGG19Features:
-    """VGG-19 features with weights from ``path`` or :data:`DEFAULT_WEIGHTS`."""
+    """VGG-19 features with weights from ``path`` or :data:`DEFAULT_WEIGHTS` (only ``features.*`` is read)."""
     file = weights_file(path)
-    from safetensors import SafetensorError
-    from safetensors.torch import load_file
-
-    try:
-        state = load_file(str(file))
-    except (SafetensorError, OSError) as error:
-        raise WiseError(f"{file}: not a readable safetensors file ({error})") from None
+    state, _ = read_safetensors(file, WHAT, MAX_MODEL_BYTES, keys=expected_shapes())
     model = VGG19Features()
-    wanted = {k: v for k, v in state.items() if k.startswith("features.")}
-    missing = set(model.state_dict()) - set(wanted)
-    if missing:
-        raise WiseError(f"{file}: not a VGG-19 state dict; missing {', '.join(sorted(missing)[:3])} and more")
     try:
-        model.load_state_dict(wanted)
+        model.load_state_dict(state)
     except RuntimeError as error:
         raise WiseError(f"{file}: weights of the wrong shape for VGG-19 ({str(error).splitlines()[0]})") from None
     return model.eval().requires_grad_(False)

@@ -4,19 +4,25 @@ from __future__ import annotations
 
 import io
 import json
+import time
 import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
+import tifffile
+import torch
 from PIL import Image
 from skimage import data
 
 from wise import effects
 from wise.cli import main as wise_main
 from wise.editor import session as session_module
-from wise.editor.app import COOKIE, create_app
+from wise.editor.access import MAX_JSON_BYTES, TOKEN_COOKIE, Access
+from wise.editor.app import COOKIE, EDITS_KEPT_SECONDS, MAX_SESSIONS, create_app
+from wise.editor.brush import MAX_POINTS
 from wise.editor.session import EditorSession
+from wise.io import read_image
 from wise.paramfile import load_params, save_params
 
 with warnings.catch_warnings():
@@ -40,11 +46,20 @@ def photo() -> bytes:
     return _png(np.asarray(Image.fromarray(data.astronaut()).resize((128, 96), Image.BICUBIC)))
 
 
+BASE_URL = "http://localhost"
+"""What the tests' requests name as their Host: one of the names the editor serves."""
+
+
+def _client(app: object) -> TestClient:
+    """A new browser (its own cookies) of ``app``."""
+    return TestClient(app, base_url=BASE_URL)
+
+
 @pytest.fixture
 def client() -> TestClient:
     template = EditorSession()
     template.choose_effect("xdog")
-    return TestClient(create_app(template))
+    return _client(create_app(template))
 
 
 @pytest.fixture
@@ -87,7 +102,7 @@ def test_state_describes_the_effect_and_sets_a_session_cookie(client: TestClient
 
 
 def test_each_browser_session_keeps_its_own_state(opened: TestClient) -> None:
-    other = TestClient(opened.app)
+    other = _client(opened.app)
     assert other.get("/api/state").json()["content"] is None
     assert opened.get("/api/state").json()["content"]["width"] == 128
 
@@ -124,12 +139,23 @@ def test_open_image_refuses_bad_uploads(client: TestClient, body: bytes, status:
 
 
 def test_uploads_are_capped_in_bytes_and_pixels(photo: bytes, monkeypatch: pytest.MonkeyPatch) -> None:
-    small = TestClient(create_app(EditorSession(), max_upload_bytes=1000))
+    small = _client(create_app(EditorSession(), max_upload_bytes=1000))
     response = small.post("/api/image", content=photo)
     assert response.status_code == 413 and "limit" in response.json()["detail"]
-    monkeypatch.setattr(session_module, "MAX_IMAGE_PIXELS", 5000)
-    response = TestClient(create_app(EditorSession())).post("/api/image", content=photo)
-    assert response.status_code == 400 and "96 pixels is more than" in response.json()["detail"]
+    monkeypatch.setattr(session_module, "pixel_limit", lambda: 5000)
+    response = _client(create_app(EditorSession())).post("/api/image", content=photo)
+    assert response.status_code == 400 and "pixels" in response.json()["detail"]
+
+
+def test_a_float_tiff_opens_as_wise_apply_reads_it(client: TestClient, tmp_path: Path) -> None:
+    pixels = np.random.default_rng(0).random((40, 50, 3), dtype=np.float32)
+    path = tmp_path / "float.tif"
+    tifffile.imwrite(path, pixels, photometric="rgb")
+    response = client.post("/api/image", content=path.read_bytes(), headers={"X-File-Name": "float.tif"})
+    assert response.status_code == 200, response.text
+    assert response.json()["content"]["width"] == 50
+    _, session = client.app.state.sessions.get(client.cookies[COOKIE])
+    assert torch.equal(session.content.image, read_image(path))
 
 
 def test_outputs_need_an_image(client: TestClient) -> None:
@@ -267,7 +293,7 @@ def test_saved_params_reopen_and_export_matches_wise_apply(opened: TestClient, p
     assert wise_main(["apply", "xdog", str(image_path), "--params", str(params_path), "-o", str(applied)]) == 0
     assert np.array_equal(_decode(exported.content), np.asarray(Image.open(applied)))
 
-    fresh = TestClient(opened.app)
+    fresh = _client(opened.app)
     fresh.post("/api/effect", json={"effect": "watercolor"})
     state = fresh.post("/api/params", content=saved.content, headers={"X-File-Name": "p.safetensors"}).json()
     assert state["effect"] == "xdog" and state["mask_size"] == [96, 128]
@@ -290,3 +316,141 @@ def test_open_params_refuses_bad_files(client: TestClient, tmp_path: Path) -> No
     response = client.post("/api/params", content=body)
     assert response.status_code == 400 and "unknown effect 'pencil'" in response.json()["detail"]
     assert client.get("/api/state").json()["effect"] == "xdog"
+
+
+def test_values_clamped_in_an_opened_file_are_noted_once(client: TestClient, tmp_path: Path) -> None:
+    xdog = effects.create("xdog")
+    values = xdog.default_params().clone()
+    values[xdog.param_names.index("brightness")] = 0.9  # normalized: beyond the top of the range
+    path = tmp_path / "p.safetensors"
+    save_params(path, xdog, values)
+    response = client.post("/api/params", content=path.read_bytes(), headers={"X-File-Name": "mine.safetensors"})
+    notice = response.json()["notice"]
+    assert response.status_code == 200 and notice.startswith("mine.safetensors: ") and "brightness" in notice
+    assert "wise-edit-" not in notice
+    assert _param(response.json(), "brightness")["mean"] == pytest.approx(xdog.spec("brightness").max)
+    assert client.get("/api/state").json()["notice"] is None
+
+
+# ----- bad inputs of every route: status, a one-line detail, the session unchanged ------------------
+
+TIFF_JUNK = b"II*\x00" + b"\x00" * 64
+BAD_INPUTS = [
+    ("GET", "/", {"headers": {"Host": "attacker.example"}}, 403, "DNS-rebinding"),
+    ("GET", "/static/missing.js", {}, 404, "Not Found"),
+    ("GET", "/static/%2e%2e/session.py", {}, 404, "Not Found"),
+    ("GET", "/api/state", {"headers": {"Host": "attacker.example:8000"}}, 403, "localhost, 127.0.0.1, [::1]"),
+    ("GET", "/api/state", {"headers": {"Sec-Fetch-Site": "cross-site"}}, 403, "cross-origin"),
+    ("DELETE", "/api/state", {}, 405, "Method Not Allowed"),
+    ("GET", "/api/nothing", {}, 404, "Not Found"),
+    ("POST", "/api/image", {"content": b""}, 400, "empty"),
+    ("POST", "/api/image", {"content": b"not an image at all"}, 400, "not an image"),
+    ("POST", "/api/image", {"content": TIFF_JUNK}, 400, "bad.png"),
+    ("POST", "/api/image", {"headers": {"Origin": "http://attacker.example"}, "content": b"x"}, 403, "cross-origin"),
+    ("POST", "/api/params", {"content": b""}, 400, "empty"),
+    ("POST", "/api/params", {"content": b"\xff" * 16}, 400, "not a safetensors"),
+    ("POST", "/api/params", {"headers": {"Sec-Fetch-Site": "same-site"}, "content": b"x"}, 403, "cross-origin"),
+    ("POST", "/api/effect", {"json": {"effect": "sketchy"}}, 400, "unknown effect"),
+    ("POST", "/api/effect", {"json": {"effect": "xdog", "preset": 3}}, 422, "preset"),
+    ("POST", "/api/effect", {"json": []}, 422, "bad request"),
+    ("POST", "/api/effect", {"content": b'{"effect": "cartoon"}'}, 415, "Content-Type: application/json"),
+    ("POST", "/api/effect", {"json": {"effect": "x" * MAX_JSON_BYTES}}, 413, "limit of 1 MB"),
+    ("POST", "/api/global", {"json": {"param": "brightness", "value": 5.0}}, 400, "outside its range"),
+    ("POST", "/api/global", {"content": b'{"param": "brightness", "value": 1e999}', "json_type": True}, 422, "finite"),
+    ("POST", "/api/global", {"content": b"", "json_type": True}, 422, "bad request"),
+    ("POST", "/api/stroke", {"json": {"param": "brightness"}}, 422, "points"),
+    ("POST", "/api/stroke", {"chunked": b"[" + b"[0.5, 0.5], " * 100_000 + b"]"}, 413, "limit of 1 MB"),
+    ("POST", "/api/stroke", {"headers": {"Origin": "null"}, "json": {}}, 403, "cross-origin"),
+    ("POST", "/api/reset", {"json": {"param": "nope"}}, 400, "nope"),
+    ("POST", "/api/reset", {"json": {}}, 422, "param"),
+    ("POST", "/api/undo", {}, 400, "nothing to undo"),
+    ("PUT", "/api/undo", {}, 405, "Method Not Allowed"),
+    ("POST", "/api/redo", {}, 400, "nothing to redo"),
+    ("POST", "/api/redo", {"headers": {"Origin": "http://localhost:9999"}}, 403, "cross-origin"),
+    ("GET", "/api/preview", {"fresh": True}, 409, "open an image"),
+    ("GET", "/api/content", {"fresh": True}, 409, "open an image"),
+    ("GET", "/api/mask/nope", {}, 400, "no parameter 'nope'"),
+    ("GET", "/api/mask/%2e%2e", {}, 400, "no parameter '..'"),
+    ("GET", "/api/params.safetensors", {"headers": {"Host": "evil.localhost"}}, 403, "DNS-rebinding"),
+    ("GET", "/api/export.png", {"fresh": True}, 409, "open an image"),
+]
+
+
+@pytest.mark.parametrize("method, path, request_args, status, message", BAD_INPUTS, ids=lambda v: str(v)[:40])
+def test_bad_inputs_of_every_route(
+    client: TestClient, photo: bytes, method: str, path: str, request_args: dict, status: int, message: str
+) -> None:
+    args = dict(request_args)
+    if not args.pop("fresh", False):
+        assert client.post("/api/image", content=photo).status_code == 200
+    if args.pop("json_type", False):
+        args["headers"] = {"Content-Type": "application/json"}
+    if "chunked" in args:
+        body = args.pop("chunked")
+        args["content"] = (body[i : i + 65536] for i in range(0, len(body), 65536))
+        args["headers"] = {"Content-Type": "application/json"}
+    args.setdefault("headers", {}).setdefault("X-File-Name", "bad.png")
+    before = client.get("/api/state").json()
+    response = client.request(method, path, **args)
+    detail = response.json()["detail"]
+    assert response.status_code == status, detail
+    assert message in detail and "\n" not in detail and "Traceback" not in detail
+    assert "wise-edit-" not in detail  # no server paths in messages
+    assert client.get("/api/state").json() == before
+
+
+def test_the_biggest_legal_stroke_fits_the_json_limit(opened: TestClient) -> None:
+    coordinate = -1.2345678901234567e-05  # as long as a coordinate gets: 17 digits, sign and exponent
+    body = {"param": "brightness", "points": [[coordinate, 0.5]] * MAX_POINTS, "radius": 0.1, "mode": "increase"}
+    text = json.dumps(body, indent=2)
+    assert len(text) < MAX_JSON_BYTES / 2
+    response = opened.post("/api/stroke", content=text, headers={"Content-Type": "application/json"})
+    assert response.status_code == 200, response.text
+
+
+# ----- who may use the editor ---------------------------------------------------------------------
+
+
+def test_a_token_is_needed_off_loopback(photo: bytes) -> None:
+    app = create_app(EditorSession(), access=Access(token="secret-token", port=8000))
+    browser = TestClient(app, base_url="http://localhost:8000")
+    for response in (browser.get("/"), browser.get("/api/state"), browser.get("/?token=wrong")):
+        assert response.status_code == 403 and "open the URL" in response.json()["detail"]
+    response = browser.get("/?token=secret-token")
+    cookie = response.headers["set-cookie"]
+    assert response.status_code == 200 and cookie.startswith(f"{TOKEN_COOKIE}_8000=secret-token;")
+    assert "HttpOnly" in cookie and "SameSite=Strict" in cookie
+    assert browser.get("/api/state").status_code == 200  # the cookie alone
+    assert browser.post("/api/image", content=photo, headers={"Origin": "http://localhost:8000"}).status_code == 200
+    other = TestClient(app, base_url="http://localhost:8000")
+    assert other.get("/api/state", headers={"Authorization": "token secret-token"}).status_code == 200
+    assert other.get("/api/state", headers={"Authorization": "token secret"}).status_code == 403
+
+
+# ----- sessions -------------------------------------------------------------------------------------
+
+
+def test_page_and_static_files_make_no_session(client: TestClient) -> None:
+    for path in ("/", "/static/editor.js", "/static/editor.css"):
+        assert COOKIE not in client.get(path).cookies
+    assert len(client.app.state.sessions) == 0
+
+
+def test_new_browsers_never_push_out_a_session_with_edits(opened: TestClient) -> None:
+    _stroke(opened)
+    for _ in range(3 * MAX_SESSIONS):
+        assert _client(opened.app).get("/api/state").status_code == 200
+    assert opened.get("/api/state").json()["can_undo"]
+
+
+def test_a_full_editor_refuses_new_browsers_until_a_session_is_left_alone(client: TestClient) -> None:
+    browsers = [client] + [_client(client.app) for _ in range(MAX_SESSIONS - 1)]
+    for browser in browsers:
+        assert browser.post("/api/global", json={"param": "brightness", "value": 0.1}).status_code == 200
+    response = _client(client.app).get("/api/state")
+    assert response.status_code == 503 and "the editor is full" in response.json()["detail"]
+    _, oldest = client.app.state.sessions.get(browsers[0].cookies[COOKIE])
+    oldest.last_edit = time.monotonic() - EDITS_KEPT_SECONDS - 1
+    assert _client(client.app).get("/api/state").status_code == 200
+    assert browsers[0].get("/api/state").json()["can_undo"] is False  # the one left alone went
+    assert all(b.get("/api/state").json()["can_undo"] for b in browsers[1:])

@@ -12,20 +12,17 @@ import urllib.request
 from pathlib import Path
 
 import pytest
-from PIL import Image
-from skimage import data
 
+from tests.images import astronaut_png
 from wise import effects
 from wise.cli import main
-from wise.editor.server import initial_session
+from wise.editor.server import _check_port, initial_session, urls
 from wise.paramfile import save_params
 
 
 @pytest.fixture(scope="module")
 def photo(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp("img") / "photo.png"
-    Image.fromarray(data.astronaut()).resize((80, 60), Image.Resampling.BILINEAR).save(path)
-    return path
+    return astronaut_png(tmp_path_factory.mktemp("img") / "photo.png", 80, 60)
 
 
 def test_initial_session_from_image_and_params(photo: Path, tmp_path: Path) -> None:
@@ -44,12 +41,12 @@ def test_initial_session_from_image_and_params(photo: Path, tmp_path: Path) -> N
 @pytest.mark.parametrize(
     "extra, message",
     [
-        (["missing.png"], "missing.png: no such image file"),
+        (["missing.png"], "missing.png: no such file"),
         (["--effect", "pencil"], "unknown effect 'pencil'"),
         (["--effect", "cartoon", "--preset", "nope"], "nope"),
         (["--preset", "bold"], "--preset needs --effect"),
-        (["--params", "missing.safetensors"], "no such parameter file"),
-        (["--port", "0"], "--port must be from 1 to 65535"),
+        (["--params", "missing.safetensors"], "missing.safetensors: no such file"),
+        (["--port", "0"], "--port: must be from 1 to 65,535"),
     ],
 )
 def test_refusals_are_one_line_with_exit_code_2(
@@ -91,3 +88,26 @@ def test_wise_edit_serves_the_image_on_loopback(photo: Path) -> None:
     finally:
         server.terminate()
         server.wait(timeout=10)
+
+
+def test_urls_to_open() -> None:
+    assert urls("127.0.0.1", 8000, None) == ["http://127.0.0.1:8000/"]
+    assert urls("::1", 8000, None) == ["http://[::1]:8000/"]
+    assert urls("192.168.1.20", 8080, "abc") == ["http://192.168.1.20:8080/?token=abc"]
+    assert urls("0.0.0.0", 8000, "abc") == [
+        f"http://{socket.gethostname()}:8000/?token=abc",
+        "http://127.0.0.1:8000/?token=abc",
+    ]
+
+
+def test_a_port_just_left_by_a_stopped_editor_is_free() -> None:
+    with socket.socket() as listening:
+        listening.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as uvicorn listens
+        listening.bind(("127.0.0.1", 0))
+        listening.listen()
+        port = listening.getsockname()[1]
+        client = socket.create_connection(("127.0.0.1", port))
+        accepted, _ = listening.accept()
+        accepted.close()  # the server side closes first: its port stays in TIME_WAIT
+        client.close()
+    _check_port("127.0.0.1", port)

@@ -62,7 +62,7 @@ def test_an_interrupted_run_writes_a_state_that_resumes(images, tmp_path: Path, 
 
     monkeypatch.setattr(run_module, "tensor_to_image", interrupt_on_third_frame)
     first = tmp_path / "first"
-    assert main(optimize_args(images, first, "--iters", "40", "--size", "48")) == 0
+    assert main(optimize_args(images, first, "--iters", "40", "--size", "48")) == 130
     scores = json.loads((first / "metrics.json").read_text())
     assert scores["interrupted"] is True and scores["iterations"] < 40
     monkeypatch.setattr(run_module, "tensor_to_image", real)

@@ -3,7 +3,19 @@
 Each browser gets its own session through a cookie. Edits are small JSON requests that
 return the new state; the preview is rendered on request from a snapshot, one render at a
 time, so the page keeps sending edits while a render runs. Uploads are raw request bodies
-(no multipart), capped in bytes and pixels; nothing in a request names a file on the server.
+(no multipart); nothing in a request names a file on the server.
+
+Every request passes :class:`wise.editor.access.Guard` first (Host, Origin, token, size).
+
+Request bodies are read on the event loop without blocking it, and decoded and validated in a
+worker thread, as are all edits and renders; so a client sending a big or slow body never
+holds up another browser's requests.
+
+Sessions: at most :data:`MAX_SESSIONS` are kept. A session with edits (opened a file, painted,
+moved a slider, ...) in the last :data:`EDITS_KEPT_SECONDS` is never dropped for a new
+browser: when the store is full, the least recently used session without such edits goes; if
+every session has recent edits, the new browser gets 503 until one has been left alone that
+long. Requests for the page and its static files make no session.
 """
 
 from __future__ import annotations
@@ -13,29 +25,43 @@ import math
 import re
 import secrets
 import threading
+import time
 from collections import OrderedDict
 from importlib import resources
-from typing import Annotated, Callable, Literal
+from typing import Annotated, Callable, Literal, TypeVar
 
 from fastapi import Depends, FastAPI, Request, Response
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import HTMLResponse, JSONResponse
 from fastapi.staticfiles import StaticFiles
-from pydantic import AfterValidator, BaseModel, Field
+from pydantic import AfterValidator, BaseModel, Field, ValidationError
 from starlette.concurrency import run_in_threadpool
 from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.requests import ClientDisconnect
 
+from wise.editor.access import (
+    MAX_JSON_BYTES,
+    MAX_UPLOAD_BYTES,
+    UPLOAD_PATHS,
+    Access,
+    Guard,
+    error_response,
+    too_large,
+)
 from wise.editor.brush import MAX_POINTS
 from wise.editor.session import EditorSession, NoContent
 from wise.errors import WiseError
 
-MAX_UPLOAD_BYTES = 64 * 1024 * 1024
-"""Largest upload (an image or a parameter file)."""
 MAX_SESSIONS = 16
-"""Sessions kept at once; the least recently used one is dropped beyond this."""
+"""Browser sessions kept at once."""
+EDITS_KEPT_SECONDS = 30 * 60
+"""A session edited within this time is never dropped to make room for another browser: long
+enough for a break away from the page, short enough that tabs left open a whole day do not
+lock others out."""
 COOKIE = "wise_session"
 _NAME_CHARACTERS = re.compile(r"[^A-Za-z0-9 ._()-]+")
 log = logging.getLogger("wise.editor")
+ModelT = TypeVar("ModelT", bound=BaseModel)
 
 
 def _finite(value: float) -> float:
@@ -71,26 +97,54 @@ class ParamName(BaseModel):
     param: str
 
 
-class SessionStore:
-    """Sessions by cookie token, each started as a copy of the template."""
+# ----- sessions --------------------------------------------------------------------------------
 
-    def __init__(self, template: EditorSession, capacity: int = MAX_SESSIONS) -> None:
+
+class EditorFull(Exception):
+    """No session can be dropped to make room for a new browser."""
+
+
+class SessionStore:
+    """Sessions by cookie value, each started as a copy of the template; see the module
+    docstring for which session goes when the store is full."""
+
+    def __init__(
+        self, template: EditorSession, capacity: int = MAX_SESSIONS, keep_edits_for: float = EDITS_KEPT_SECONDS
+    ) -> None:
         self.template = template
         self.capacity = capacity
-        self._sessions: OrderedDict[str, EditorSession] = OrderedDict()
+        self.keep_edits_for = keep_edits_for
+        self._sessions: OrderedDict[str, EditorSession] = OrderedDict()  # least recently used first
         self._lock = threading.Lock()
 
-    def get(self, token: str | None) -> tuple[str, EditorSession]:
+    def __len__(self) -> int:
+        return len(self._sessions)
+
+    def get(self, key: str | None) -> tuple[str, EditorSession]:
+        """The session of a cookie value; a new one (and its key) for an unknown or missing one."""
         with self._lock:
-            if token is not None and token in self._sessions:
-                self._sessions.move_to_end(token)
-                return token, self._sessions[token]
-            token = secrets.token_urlsafe(24)
+            if key is not None and key in self._sessions:
+                self._sessions.move_to_end(key)
+                return key, self._sessions[key]
+            if len(self._sessions) >= self.capacity:
+                self._make_room()
+            key = secrets.token_urlsafe(24)
             session = self.template.copy()
-            self._sessions[token] = session
-            while len(self._sessions) > self.capacity:
-                self._sessions.popitem(last=False)
-            return token, session
+            self._sessions[key] = session
+            return key, session
+
+    def _make_room(self) -> None:
+        since = time.monotonic() - self.keep_edits_for
+        for key, session in self._sessions.items():
+            if not session.has_edits(since):
+                del self._sessions[key]
+                return
+        minutes = f"{self.keep_edits_for / 60:g}"
+        raise EditorFull(
+            f"the editor is full: all {self.capacity} browser sessions were edited in the last {minutes} minutes; "
+            f"a place frees when one has had no edit for {minutes} minutes, or restart wise edit "
+            "(after saving the parameters)"
+        )
 
 
 def _display_name(header: str | None, fallback: str) -> str:
@@ -101,83 +155,109 @@ def _display_name(header: str | None, fallback: str) -> str:
     return name or fallback
 
 
+class _Aborted(Exception):
+    """The client went away while sending its request body."""
+
+
 async def _body(request: Request, limit: int) -> bytes:
-    declared = request.headers.get("content-length")
-    if declared is not None and declared.isdigit() and int(declared) > limit:
-        raise _TooLarge(limit)
+    """The request body, refused once it exceeds ``limit`` (the Guard refused a declared
+    Content-Length over it already; this counts a chunked one)."""
     chunks, total = [], 0
-    async for chunk in request.stream():
-        total += len(chunk)
-        if total > limit:
-            raise _TooLarge(limit)
-        chunks.append(chunk)
+    try:
+        async for chunk in request.stream():
+            total += len(chunk)
+            if total > limit:
+                raise StarletteHTTPException(413, too_large(limit, request.url.path))
+            chunks.append(chunk)
+    except ClientDisconnect:
+        what = "upload" if request.url.path in UPLOAD_PATHS else "request"
+        raise _Aborted(f"{what} to {request.url.path} aborted by the client") from None
     return b"".join(chunks)
 
 
-class _TooLarge(Exception):
-    def __init__(self, limit: int) -> None:
-        super().__init__(f"the upload is larger than the editor's limit of {limit // (1024 * 1024)} MB")
+async def _json_body(request: Request, model: type[ModelT]) -> ModelT:
+    """A JSON body as ``model``: read with the limit, decoded and validated in a worker thread."""
+    content_type = request.headers.get("content-type", "").partition(";")[0].strip().lower()
+    if content_type != "application/json":
+        raise StarletteHTTPException(415, "send the request body as JSON (Content-Type: application/json)")
+    data = await _body(request, MAX_JSON_BYTES)
+    try:
+        return await run_in_threadpool(model.model_validate_json, data)
+    except ValidationError as e:
+        raise StarletteHTTPException(422, _validation_message(e.errors())) from None
+
+
+async def _edited(s: EditorSession, change: Callable[..., object], *args: object) -> dict:
+    """Apply an edit in a worker thread; the new state."""
+
+    def run() -> dict:
+        change(*args)
+        return s.describe()
+
+    return await run_in_threadpool(run)
 
 
 def _session(request: Request, response: Response) -> EditorSession:
     """The requesting browser's session (a new one, with its cookie, on the first request)."""
-    token, found = request.app.state.sessions.get(request.cookies.get(COOKIE))
-    if token != request.cookies.get(COOKIE):
-        response.set_cookie(COOKIE, token, httponly=True, samesite="strict")
+    name = request.app.state.cookie
+    key, found = request.app.state.sessions.get(request.cookies.get(name))
+    if key != request.cookies.get(name):
+        response.set_cookie(name, key, httponly=True, samesite="strict")
     return found
 
 
 Session = Annotated[EditorSession, Depends(_session)]
 
 
-def _error(status: int, message: str) -> JSONResponse:
-    return JSONResponse({"detail": " ".join(message.split())}, status_code=status)
-
-
-def _validation_message(error: RequestValidationError) -> str:
+def _validation_message(errors: list) -> str:
     problems = []
-    for item in error.errors()[:3]:
+    for item in errors[:3]:
         where = ".".join(str(part) for part in item.get("loc", ()) if part != "body")
         problems.append(f"{where or 'request'}: {item.get('msg', 'invalid')}")
     return "bad request: " + "; ".join(problems)
 
 
-def create_app(template: EditorSession, max_upload_bytes: int = MAX_UPLOAD_BYTES) -> FastAPI:
-    """The editor app; every new browser session starts as a copy of ``template``."""
+def create_app(
+    template: EditorSession, max_upload_bytes: int = MAX_UPLOAD_BYTES, access: Access | None = None
+) -> FastAPI:
+    """The editor app; every new browser session starts as a copy of ``template``. ``access``
+    defaults to loopback host names without a token."""
+    access = access or Access()
     app = FastAPI(title="wise editor", docs_url=None, redoc_url=None, openapi_url=None)
     app.state.sessions = SessionStore(template)
+    app.state.cookie = access.cookie(COOKIE)
+    app.state.access = access
     render_lock = threading.Lock()  # renders are CPU-bound: one at a time keeps each fast
     static = resources.files("wise.editor") / "static"
     app.mount("/static", StaticFiles(directory=str(static)), name="static")
+    app.add_middleware(Guard, access=access, max_upload_bytes=max_upload_bytes)
 
     @app.exception_handler(WiseError)
     async def _bad_input(request: Request, error: WiseError) -> JSONResponse:
-        return _error(409 if isinstance(error, NoContent) else 400, str(error))
+        return error_response(409 if isinstance(error, NoContent) else 400, str(error))
 
-    @app.exception_handler(_TooLarge)
-    async def _too_large(request: Request, error: _TooLarge) -> JSONResponse:
-        return _error(413, str(error))
+    @app.exception_handler(EditorFull)
+    async def _full(request: Request, error: EditorFull) -> JSONResponse:
+        return error_response(503, str(error))
+
+    @app.exception_handler(_Aborted)
+    async def _aborted(request: Request, error: _Aborted) -> Response:
+        log.warning("%s", error)
+        return Response(status_code=400)  # nobody is left to read it
 
     @app.exception_handler(RequestValidationError)
     async def _invalid(request: Request, error: RequestValidationError) -> JSONResponse:
-        return _error(422, _validation_message(error))
+        return error_response(422, _validation_message(list(error.errors())))
 
     @app.exception_handler(StarletteHTTPException)
     async def _http(request: Request, error: StarletteHTTPException) -> JSONResponse:
-        return _error(error.status_code, str(error.detail))
+        return error_response(error.status_code, str(error.detail))
 
     @app.exception_handler(Exception)
     async def _unexpected(request: Request, error: Exception) -> JSONResponse:
-        log.exception("unexpected error in %s %s", request.method, request.url.path)
-        return _error(500, f"internal error ({type(error).__name__}); the server log has the details")
-
-    @app.middleware("http")
-    async def _headers(request: Request, call_next):  # noqa: ANN001, ANN202 (Starlette's signature)
-        response = await call_next(request)
-        response.headers["Content-Security-Policy"] = "default-src 'self'; img-src 'self' blob: data:"
-        response.headers["X-Content-Type-Options"] = "nosniff"
-        response.headers.setdefault("Cache-Control", "no-store")
-        return response
+        # one line here: the server logs the traceback itself
+        log.error("unexpected error in %s %s: %s", request.method, request.url.path, type(error).__name__)
+        return error_response(500, f"internal error ({type(error).__name__}); the server log has the details")
 
     @app.get("/", response_class=HTMLResponse)
     def page() -> HTMLResponse:
@@ -187,39 +267,37 @@ def create_app(template: EditorSession, max_upload_bytes: int = MAX_UPLOAD_BYTES
     def state(s: Session) -> dict:
         return s.describe()
 
-    async def upload(request: Request, open_file: Callable[[bytes, str], None], fallback: str) -> None:
+    async def upload(request: Request, s: EditorSession, open_file: Callable[[bytes, str], None], name: str) -> dict:
         data = await _body(request, max_upload_bytes)
-        await run_in_threadpool(open_file, data, _display_name(request.headers.get("x-file-name"), fallback))
+        return await _edited(s, open_file, data, _display_name(request.headers.get("x-file-name"), name))
 
     @app.post("/api/image")
     async def open_image(request: Request, s: Session) -> dict:
-        await upload(request, s.open_image, "image")
-        return s.describe()
+        return await upload(request, s, s.open_image, "image")
 
     @app.post("/api/params")
     async def open_params(request: Request, s: Session) -> dict:
-        await upload(request, s.open_params, "params")
-        return s.describe()
+        return await upload(request, s, s.open_params, "params")
 
     @app.post("/api/effect")
-    def choose_effect(choice: EffectChoice, s: Session) -> dict:
-        s.choose_effect(choice.effect, choice.preset)
-        return s.describe()
+    async def choose_effect(request: Request, s: Session) -> dict:
+        choice = await _json_body(request, EffectChoice)
+        return await _edited(s, s.choose_effect, choice.effect, choice.preset)
 
     @app.post("/api/global")
-    def set_global(edit: GlobalValue, s: Session) -> dict:
-        s.set_global(edit.param, edit.value)
-        return s.describe()
+    async def set_global(request: Request, s: Session) -> dict:
+        edit = await _json_body(request, GlobalValue)
+        return await _edited(s, s.set_global, edit.param, edit.value)
 
     @app.post("/api/stroke")
-    def stroke(edit: Stroke, s: Session) -> dict:
-        s.stroke(edit.param, edit.points, edit.radius, edit.hardness, edit.mode, edit.amount, edit.value)
-        return s.describe()
+    async def stroke(request: Request, s: Session) -> dict:
+        e = await _json_body(request, Stroke)
+        return await _edited(s, s.stroke, e.param, e.points, e.radius, e.hardness, e.mode, e.amount, e.value)
 
     @app.post("/api/reset")
-    def reset(edit: ParamName, s: Session) -> dict:
-        s.reset(edit.param)
-        return s.describe()
+    async def reset(request: Request, s: Session) -> dict:
+        edit = await _json_body(request, ParamName)
+        return await _edited(s, s.reset, edit.param)
 
     @app.post("/api/undo")
     def undo(s: Session) -> dict:

@@ -1,8 +1,14 @@
-"""Starting the editor: the first session's state from the command line, then uvicorn."""
+"""Starting the editor: the first session's state from the command line, then uvicorn.
+
+On a loopback address the editor answers without a token; on any other address :func:`serve`
+makes a random access token, which the URL it prints carries (see :mod:`wise.editor.app`).
+"""
 
 from __future__ import annotations
 
 import ipaddress
+import logging
+import secrets
 import socket
 import sys
 from pathlib import Path
@@ -11,18 +17,20 @@ from typing import TextIO
 from wise import effects
 from wise.editor.session import EditorSession
 from wise.errors import WiseError
+from wise.files import MAX_PARAMS_BYTES, open_regular
+from wise.io import MAX_IMAGE_BYTES
 
 LOOPBACK = "127.0.0.1"
+WILDCARD_ADDRESSES = frozenset({"0.0.0.0", "::", "[::]", ""})
+"""Listen addresses that mean every interface."""
+TOKEN_BYTES = 32
+"""Random bytes in an access token (43 URL-safe characters)."""
 
 
-def _read(path: str, what: str) -> bytes:
-    file = Path(path)
-    if not file.is_file():
-        raise WiseError(f"{path}: no such {what} file")
-    try:
-        return file.read_bytes()
-    except OSError as e:
-        raise WiseError(f"{path}: cannot read the file ({e.strerror or e})") from None
+def _read(path: str, what: str, max_bytes: int) -> bytes:
+    """A file named on the command line, refused unless a regular file within ``max_bytes``."""
+    with open_regular(path, what, max_bytes) as file:
+        return file.read(max_bytes + 1)
 
 
 def initial_session(
@@ -35,12 +43,12 @@ def initial_session(
         raise WiseError("--preset needs --effect, e.g. --effect watercolor --preset " + preset)
     session = EditorSession()
     if params is not None:
-        session.open_params(_read(params, "parameter"), Path(params).name)
+        session.open_params(_read(params, "parameter file", MAX_PARAMS_BYTES), Path(params).name)
     elif effect is not None:
         effects.create(effect)
         session.choose_effect(effect, preset)
     if image is not None:
-        session.open_image(_read(image, "image"), Path(image).name)
+        session.open_image(_read(image, "image", MAX_IMAGE_BYTES), Path(image).name)
     return session
 
 
@@ -50,6 +58,8 @@ def _check_port(host: str, port: int) -> None:
     try:
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
         with socket.socket(family, socket.SOCK_STREAM) as probe:
+            if sys.platform != "win32":  # as uvicorn binds: a port left in TIME_WAIT by a stopped editor is free
+                probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             probe.bind((host, port))
     except OSError as e:
         message = f"cannot listen on {host}:{port} ({e.strerror or e}); choose another --port or --host"
@@ -63,15 +73,50 @@ def _is_loopback(host: str) -> bool:
         return host == "localhost"
 
 
+def _url_host(host: str) -> str:
+    return f"[{host}]" if ":" in host else host
+
+
+def urls(host: str, port: int, token: str | None) -> list[str]:
+    """The addresses to open the editor at: the one it listens on (this machine's name for a
+    wildcard address, then also 127.0.0.1), with the token if there is one."""
+    query = f"?token={token}" if token else ""
+    if host.strip().lower() in WILDCARD_ADDRESSES:
+        return [f"http://{_url_host(name)}:{port}/{query}" for name in (socket.gethostname() or LOOPBACK, LOOPBACK)]
+    return [f"http://{_url_host(host)}:{port}/{query}"]
+
+
+def _log_to(stream: TextIO) -> None:
+    """The editor's own messages (e.g. an aborted upload) as one line each, named."""
+    logger = logging.getLogger("wise.editor")
+    if not logger.handlers:
+        handler = logging.StreamHandler(stream)
+        handler.setFormatter(logging.Formatter("%(name)s: %(message)s"))
+        logger.addHandler(handler)
+        logger.setLevel(logging.INFO)
+        logger.propagate = False
+
+
 def serve(session: EditorSession, host: str = LOOPBACK, port: int = 8000, out: TextIO = sys.stdout) -> None:
-    """Serve the editor until interrupted."""
+    """Serve the editor until interrupted; off loopback with a new access token."""
     import uvicorn
 
+    from wise.editor.access import access_for
     from wise.editor.app import create_app
 
     _check_port(host, port)
-    if not _is_loopback(host):
-        print(f"warning: listening on {host}: anyone who can reach this machine can use the editor", file=out)
-    shown = f"[{host}]" if ":" in host else host
-    print(f"wise editor at http://{shown}:{port}/ (Ctrl-C stops it)", file=out, flush=True)
-    uvicorn.run(create_app(session), host=host, port=port, log_level="warning")
+    token = None if _is_loopback(host) else secrets.token_urlsafe(TOKEN_BYTES)
+    if token is not None:
+        print(
+            f"warning: listening on {host}: anyone who can reach this machine and has the URL below "
+            "(its token) can use the editor",
+            file=out,
+        )
+    first, *others = urls(host, port, token)
+    print(f"wise editor at {first} (Ctrl-C stops it)", file=out)
+    for url in others:
+        print(f"  or {url}", file=out)
+    out.flush()
+    app = create_app(session, access=access_for(host, port, token))
+    _log_to(sys.stderr)
+    uvicorn.run(app, host=host, port=port, log_level="warning")

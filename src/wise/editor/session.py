@@ -4,6 +4,8 @@ Masks are edited in the normalized parameter space at their own resolution (that
 opened parameter file, else the preview's), so a saved file holds exactly what was painted
 and ``wise apply --params`` renders it at any resolution. Every edit bumps ``version``; a
 preview is rendered from a snapshot of the state, so edits never wait for a render.
+Each session remembers when it was last edited, which decides whether the server may drop it
+to make room for another browser (see :class:`wise.editor.app.SessionStore`).
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ import functools
 import io
 import tempfile
 import threading
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Iterator, Sequence
@@ -20,28 +23,25 @@ from typing import Callable, Iterator, Sequence
 import numpy as np
 import torch
 import torch.nn.functional as F
-from PIL import Image, UnidentifiedImageError
+from PIL import Image
 
 from wise import effects
 from wise.editor.brush import paint, stroke_weights
 from wise.effects.base import Effect
 from wise.errors import WiseError
-from wise.io import READ_FORMATS, read_image, tensor_to_image, write_image
-from wise.paramfile import describe, load_params, save_params
+from wise.io import decode_image_bytes, pixel_limit, tensor_to_image, write_image
+from wise.paramfile import effect_of, load_params, save_params
 from wise.params import resize_masks, to_real
 from wise.render import render
 
 PREVIEW_SHORT_SIDE = 512
 """Short side of the preview and of the masks made for an image without a parameter file."""
-MAX_IMAGE_PIXELS = 40_000_000
-"""Largest content image accepted (pixels); the full-resolution export renders all of them."""
 MIN_IMAGE_SIDE = 8
 MAX_HISTORY = 100
 """Most undo steps kept per session (each holds one parameter's mask)."""
 DEFAULT_EFFECT = "watercolor"
 OVERLAY_MIN_ALPHA = 0.3
 """Opacity of the mask overlay at the middle of a parameter's range."""
-_SUFFIXES = {"PNG": ".png", "JPEG": ".jpg", "WEBP": ".webp", "TIFF": ".tif"}
 
 
 class NoContent(WiseError):
@@ -112,25 +112,12 @@ def decode_image(data: bytes, name: str = "image") -> Content:
     """Decode uploaded image bytes (PNG, JPEG, WebP or TIFF) exactly as ``wise apply`` reads a file."""
     if not data:
         raise WiseError("the image upload is empty; choose a PNG, JPEG, WebP or TIFF file")
-    try:
-        with Image.open(io.BytesIO(data)) as probe:
-            fmt, (width, height) = probe.format, probe.size
-    except (UnidentifiedImageError, OSError, ValueError, SyntaxError, Image.DecompressionBombError):
-        supported = ", ".join(READ_FORMATS.values())
-        raise WiseError(f"{name}: not an image in a supported format ({supported})") from None
-    if fmt not in _SUFFIXES:
-        raise WiseError(f"{name}: unsupported image format {fmt}; supported: {', '.join(READ_FORMATS.values())}")
-    if width * height > MAX_IMAGE_PIXELS:
-        raise WiseError(
-            f"{name}: {width}x{height} pixels is more than the editor's limit of {MAX_IMAGE_PIXELS:,}; "
-            "reduce the image first"
-        )
-    with _as_file(data, f"upload{_SUFFIXES[fmt]}", name) as path:
-        image = read_image(path)
-    if min(image.shape[-2:]) < MIN_IMAGE_SIDE:
+    image = decode_image_bytes(data, name, pixel_limit())
+    height, width = image.shape[-2:]
+    if min(height, width) < MIN_IMAGE_SIDE:
         raise WiseError(f"{name}: {width}x{height} pixels is too small; use at least {MIN_IMAGE_SIDE} on each side")
-    small = preview_size((image.shape[-2], image.shape[-1]))
-    preview = image if small == tuple(image.shape[-2:]) else F.interpolate(image, size=small, mode="area")
+    small = preview_size((height, width))
+    preview = image if small == (height, width) else F.interpolate(image, size=small, mode="area")
     return Content(name=name, image=image, preview=preview)
 
 
@@ -178,6 +165,10 @@ class EditorSession:
     opened: torch.Tensor = field(default_factory=lambda: torch.zeros(0))
     masks_from_file: bool = False
     version: int = 0
+    last_edit: float | None = None
+    """``time.monotonic()`` of the last change made in this session; None while it is as it started."""
+    notice: str | None = None
+    """A message for the page about the last file opened (e.g. values clamped), sent once."""
     _undo: list[_Change] = field(default_factory=list)
     _redo: list[_Change] = field(default_factory=list)
     _lock: threading.RLock = field(default_factory=threading.RLock)
@@ -185,6 +176,7 @@ class EditorSession:
     def __post_init__(self) -> None:
         if self.masks.numel() == 0:
             self._open_masks(self._preset_values())
+            self.last_edit = None  # a new session's own start is no edit
 
     def copy(self) -> EditorSession:
         """A new session in this one's state, with its own effect, masks and empty history."""
@@ -196,6 +188,7 @@ class EditorSession:
                 masks=self.masks.clone(),
                 opened=self.opened.clone(),
                 masks_from_file=self.masks_from_file,
+                notice=self.notice,
             )
 
     # ----- opening -------------------------------------------------------------------------
@@ -218,7 +211,16 @@ class EditorSession:
         self.opened = self.masks.clone()
         self._undo.clear()
         self._redo.clear()
+        self._changed()
+
+    def _changed(self) -> None:
         self.version += 1
+        self.last_edit = time.monotonic()
+
+    def has_edits(self, since: float = float("-inf")) -> bool:
+        """Whether this session was changed (opened a file, painted, ...) at ``since`` or later."""
+        with self._lock:
+            return self.last_edit is not None and self.last_edit >= since
 
     def open_image(self, data: bytes, name: str = "image") -> None:
         """Open a content image. Masks from a parameter file stay as they are (a render resizes
@@ -231,19 +233,23 @@ class EditorSession:
                 self._open_masks(resize_masks(self.masks, self._mask_size()))
                 self.opened = opened
             else:
-                self.version += 1
+                self._changed()
 
     def open_params(self, data: bytes, name: str = "params") -> None:
-        """Open a parameter file (as written by ``wise optimize`` or this editor) for its effect."""
+        """Open a parameter file (as written by ``wise optimize`` or this editor) for its effect;
+        what the reader noted about it (e.g. clamped values) becomes the :attr:`notice`."""
         if not data:
             raise WiseError("the parameter file upload is empty; choose a .safetensors file from wise optimize")
+        notes: list[str] = []
         with _as_file(data, "params.safetensors", name) as path:
-            effect = effects.create(describe(path).get("effect", ""))
-            params = load_params(path, effect)
+            effect = effects.create(effect_of(path))
+            params = load_params(path, effect, notes)
+            notice = " ".join(note.replace(str(path), name) for note in notes) or None
         with self._lock:
             self.effect, self.preset = effect, None
             self._open_masks(params[0] if params.dim() == 2 else params)
             self.masks_from_file = params.dim() == 4
+            self.notice = notice
 
     def choose_effect(self, name: str, preset: str | None = None) -> None:
         """Switch to an effect (and preset): global values in fresh masks."""
@@ -269,7 +275,7 @@ class EditorSession:
         self._undo.append(_Change(index, before, after.clone()))
         del self._undo[:-MAX_HISTORY]
         self._redo.clear()
-        self.version += 1
+        self._changed()
 
     def set_global(self, param: str, value: float) -> None:
         """Offset a parameter's whole mask so that its mean is ``value`` (real units)."""
@@ -331,7 +337,7 @@ class EditorSession:
         if not source:
             raise WiseError(f"nothing to {what}")
         target.append(source.pop())
-        self.version += 1
+        self._changed()
         return target[-1]
 
     # ----- output ----------------------------------------------------------------------------
@@ -393,6 +399,7 @@ class EditorSession:
                 preview_h, preview_w = self.content.preview.shape[-2:]
                 content = {"name": self.content.name, "width": width, "height": height}
                 content.update({"preview_width": int(preview_w), "preview_height": int(preview_h)})
+            notice, self.notice = self.notice, None
             return {
                 "version": self.version,
                 "effect": self.effect.name,
@@ -403,4 +410,5 @@ class EditorSession:
                 "params": params,
                 "can_undo": bool(self._undo),
                 "can_redo": bool(self._redo),
+                "notice": notice,
             }

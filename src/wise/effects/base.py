@@ -10,7 +10,7 @@ from torch import nn
 
 from wise import params as P
 from wise.effects.recompute import recompute
-from wise.errors import WiseError
+from wise.errors import WiseError, size_text
 from wise.filters._checks import REFERENCE_SHORT_SIDE
 from wise.params import ParamSpec
 
@@ -107,7 +107,8 @@ class Effect(nn.Module):
             raise WiseError(f"image must be a float tensor in [0, 1], got {image.dtype}")
         if min(image.shape[-2:]) < 8:
             raise WiseError(
-                f"image is too small ({image.shape[-2]}x{image.shape[-1]}); both sides must be at least 8 pixels"
+                f"image is too small ({size_text(image.shape[-1], image.shape[-2])} pixels); "
+                "both sides must be at least 8 pixels"
             )
         params = P.check_params(params, self.param_specs, image.shape[0]).to(image)
         values = P.real_maps(params, self.param_specs, tuple(image.shape[-2:]))

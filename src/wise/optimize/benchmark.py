@@ -20,9 +20,11 @@ import torch.nn.functional as F
 from wise import effects, metrics
 from wise.effects.base import Effect
 from wise.errors import WiseError
+from wise.interrupt import ctrl_c
 from wise.io import READ_FORMATS, atomic_path, read_image
 from wise.optimize.parametric import (
     CROP_SIZE,
+    Outcome,
     Settings,
     describe_levels,
     optimize_coarse_to_fine,
@@ -89,6 +91,32 @@ def photos_in(folder: str) -> list[Path]:
     return found
 
 
+def _content(photo: torch.Tensor, size: int) -> torch.Tensor:
+    """The photo with its short side at ``size``."""
+    factor = size / min(photo.shape[-2:])
+    shape = (max(8, round(photo.shape[-2] * factor)), max(8, round(photo.shape[-1] * factor)))
+    return F.interpolate(photo, size=shape, mode="area" if factor < 1 else "bilinear")
+
+
+def _trial(
+    effect: Effect,
+    content: torch.Tensor,
+    generator: torch.Generator,
+    levels: tuple[tuple[int, Settings], ...],
+    crops: Settings | None,
+    crop_seed: int,
+) -> tuple[torch.Tensor, torch.Tensor, Outcome]:
+    """One trial: random parameters, their reference, and the optimization's outcome."""
+    truth, reference = random_reference(effect, content, generator)
+    outcome = optimize_coarse_to_fine(effect, content, reference, effect.default_params(), levels)
+    if crops is not None and not outcome.interrupted:
+        coarse_seconds = outcome.seconds
+        crop_generator = torch.Generator().manual_seed(crop_seed)
+        outcome = optimize_on_crops(effect, content, reference, outcome.params, crops, crop_generator)
+        outcome.seconds += coarse_seconds
+    return truth, reference, outcome
+
+
 def recover(
     effect_name: str,
     images_dir: str,
@@ -101,54 +129,87 @@ def recover(
     json_path: str | None = None,
     out: TextIO = sys.stdout,
 ) -> dict:
-    """Run the benchmark; prints a table and returns (and optionally writes) the results."""
+    """Run the benchmark; prints a table and returns (and optionally writes) the results.
+
+    The photos of the trials are read before the first one starts. Ctrl-C ends the run: the
+    trial in progress is dropped, and the results of the finished ones are written with
+    ``"interrupted": true``.
+    """
     if trials < 1:
         raise WiseError(f"--trials must be at least 1, got {trials}")
     effect = effects.create(effect_name)
-    photos = photos_in(images_dir)
+    photos = photos_in(images_dir)[:trials]
+    contents = {path: _content(read_image(path), size) for path in photos}
     generator = torch.Generator().manual_seed(seed)
     levels, crops = schedule(iterations, lr, loss)
-    rows = []
+    rows: list[dict] = []
     print("| trial | image | SSIM | PSNR |\n| --- | --- | --- | --- |", file=out)
-    for trial in range(trials):
-        photo_path = photos[trial % len(photos)]
-        photo = read_image(photo_path)
-        factor = size / min(photo.shape[-2:])
-        shape = (max(8, round(photo.shape[-2] * factor)), max(8, round(photo.shape[-1] * factor)))
-        content = F.interpolate(photo, size=shape, mode="area" if factor < 1 else "bilinear")
-        truth, reference = random_reference(effect, content, generator)
-        outcome = optimize_coarse_to_fine(effect, content, reference, effect.default_params(), levels)
-        if crops is not None:
-            coarse_seconds = outcome.seconds
-            generator = torch.Generator().manual_seed(seed * 1_000_003 + trial)
-            outcome = optimize_on_crops(effect, content, reference, outcome.params, crops, generator)
-            outcome.seconds += coarse_seconds
-        assert outcome.result is not None
-        row = {
-            "trial": trial,
-            "image": photo_path.name,
-            "ssim": metrics.ssim(outcome.result, reference),
-            "psnr": min(PSNR_CAP, metrics.psnr(outcome.result, reference)),
-            "true_params": effect.params_to_dict(truth[0]),
-            "found_params": effect.params_to_dict(outcome.params[0]),
-            "seconds": round(outcome.seconds, 2),
-        }
-        rows.append(row)
-        print(f"| {trial} | {row['image']} | {row['ssim']:.4f} | {row['psnr']:.2f} |", file=out, flush=True)
-    result = {
+    with ctrl_c(out) as interruption:
+        try:
+            for trial in range(trials):
+                photo_path = photos[trial % len(photos)]
+                truth, reference, outcome = _trial(
+                    effect, contents[photo_path], generator, levels, crops, seed * 1_000_003 + trial
+                )
+                if outcome.interrupted:
+                    raise KeyboardInterrupt
+                rows.append(_row(effect, trial, photo_path, truth, reference, outcome))
+                print(_table_row(rows[-1]), file=out, flush=True)
+        except KeyboardInterrupt:
+            print(f"interrupted: {len(rows)} of {trials} trials finished", file=out, flush=True)
+        interruption.hold()
+        result = _summary(effect_name, size, iterations, loss, seed, levels, crops, rows, interruption.received)
+        if rows:
+            print(f"mean SSIM {result['mean_ssim']:.4f}, mean PSNR {result['mean_psnr']:.2f} dB", file=out)
+        if json_path is not None:
+            with atomic_path(json_path) as path:
+                Path(path).write_text(json.dumps(result, indent=2) + "\n")
+    result["interrupted"] = interruption.received
+    return result
+
+
+def _row(
+    effect: Effect, trial: int, photo: Path, truth: torch.Tensor, reference: torch.Tensor, outcome: Outcome
+) -> dict:
+    assert outcome.result is not None
+    return {
+        "trial": trial,
+        "image": photo.name,
+        "ssim": metrics.ssim(outcome.result, reference),
+        "psnr": min(PSNR_CAP, metrics.psnr(outcome.result, reference)),
+        "true_params": effect.params_to_dict(truth[0]),
+        "found_params": effect.params_to_dict(outcome.params[0]),
+        "seconds": round(outcome.seconds, 2),
+    }
+
+
+def _table_row(row: dict) -> str:
+    return f"| {row['trial']} | {row['image']} | {row['ssim']:.4f} | {row['psnr']:.2f} |"
+
+
+def _summary(
+    effect_name: str,
+    size: int,
+    iterations: int,
+    loss: str,
+    seed: int,
+    levels: tuple[tuple[int, Settings], ...],
+    crops: Settings | None,
+    rows: list[dict],
+    interrupted: bool,
+) -> dict:
+    """The JSON-ready results; the means are None when no trial finished."""
+    return {
         "effect": effect_name,
         "size": size,
         "iterations": iterations,
         "loss": loss,
         "seed": seed,
-        "mean_ssim": statistics.fmean(r["ssim"] for r in rows),
-        "mean_psnr": statistics.fmean(r["psnr"] for r in rows),
+        "interrupted": interrupted,
+        "trials_finished": len(rows),
+        "mean_ssim": statistics.fmean(r["ssim"] for r in rows) if rows else None,
+        "mean_psnr": statistics.fmean(r["psnr"] for r in rows) if rows else None,
         "psnr_cap": PSNR_CAP,
         "levels": describe_schedule(levels, crops),
         "trials": rows,
     }
-    print(f"mean SSIM {result['mean_ssim']:.4f}, mean PSNR {result['mean_psnr']:.2f} dB", file=out)
-    if json_path is not None:
-        with atomic_path(json_path) as path:
-            Path(path).write_text(json.dumps(result, indent=2) + "\n")
-    return result

@@ -13,7 +13,8 @@ import torch.nn.functional as F
 
 from wise import effects, metrics
 from wise.effects.base import Effect
-from wise.errors import WiseError
+from wise.errors import WiseError, size_text
+from wise.interrupt import ctrl_c
 from wise.io import atomic_path, read_image, tensor_to_image, write_image
 from wise.nst import stylize, stylize_gatys
 from wise.optimize.parametric import Outcome, Settings, describe_levels, optimize_coarse_to_fine, pyramid
@@ -27,6 +28,10 @@ ASPECT_TOLERANCE = 0.01
 ANIMATION_FRAMES = 40
 NST_METHODS = ("onnx", "gatys")
 PROGRESS_EVERY = 10
+RESULT_FILES = ("params.safetensors", "result.png", "metrics.json", "report.html", "optimization.gif")
+"""What :func:`run` writes into its folder, the resumable parameter file first."""
+TARGET_FILE = "target.png"
+"""The neural style transfer reference :func:`transfer` adds."""
 
 
 def create_effect(name: str, seed: int) -> Effect:
@@ -42,25 +47,32 @@ def working_size(height: int, width: int, short_side: int) -> tuple[int, int]:
     return max(8, round(height * factor)), max(8, round(width * factor))
 
 
-def match_target(target: torch.Tensor, size: tuple[int, int], out: TextIO) -> torch.Tensor:
-    """The target at the working size; refuses a different aspect ratio."""
+def match_target(
+    target: torch.Tensor, size: tuple[int, int], out: TextIO, name: str = "the target", content: str = "the content"
+) -> torch.Tensor:
+    """The target at the working size (rows, columns); refuses a different aspect ratio."""
     height, width = target.shape[-2:]
     if abs((width / height) / (size[1] / size[0]) - 1.0) > ASPECT_TOLERANCE:
         raise WiseError(
-            f"the target is {width}x{height} but the content's aspect ratio is {size[1]}:{size[0]}; "
-            "crop the target to the content's aspect ratio"
+            f"{name}: {size_text(width, height)} pixels has another aspect ratio than {content} "
+            f"({size_text(size[1], size[0])} at the working size); crop the target to the content's aspect ratio"
         )
     if (height, width) != size:
-        print(f"resizing the target from {width}x{height} to {size[1]}x{size[0]}", file=out)
+        print(f"resizing the target from {size_text(width, height)} to {size_text(size[1], size[0])}", file=out)
         target = F.interpolate(target, size=size, mode="area" if height > size[0] else "bilinear", align_corners=None)
     return target.clamp(0.0, 1.0)
+
+
+def init_is_file(init: str) -> bool:
+    """Whether ``--init`` names a parameter file rather than a preset."""
+    return init.endswith(".safetensors") or Path(init).exists()
 
 
 def initial_params(effect: Effect, init: str | None) -> torch.Tensor:
     """A preset name or a parameter file (resume); the defaults without ``init``."""
     if init is None:
         return effect.default_params()
-    if init.endswith(".safetensors") or Path(init).is_file():
+    if init_is_file(init):
         return load_params(init, effect)
     return effect.preset(init)
 
@@ -91,7 +103,7 @@ def run(
     target_full = read_image(target_path)
     size_hw = working_size(*content_full.shape[-2:], size)
     content = F.interpolate(content_full, size=size_hw, mode="area").to(device)
-    target = match_target(target_full, size_hw, out).to(device)
+    target = match_target(target_full, size_hw, out, str(target_path), str(content_path)).to(device)
     folder.mkdir(parents=True, exist_ok=True)
 
     frames, every = [], max(1, settings.iterations // ANIMATION_FRAMES)
@@ -104,12 +116,41 @@ def run(
             print(f"iteration {iteration}/{settings.iterations}  loss {loss:.5f}", file=out, flush=True)
 
     levels = pyramid(settings)
-    outcome = optimize_coarse_to_fine(effect, content, target, start_params.to(device), levels, on_step)
-    if outcome.interrupted:
-        print(f"interrupted after {len(outcome.losses)} iterations; writing the state reached", file=out)
+    with ctrl_c(out) as interruption:
+        outcome = optimize_coarse_to_fine(effect, content, target, start_params.to(device), levels, on_step)
+        interruption.hold()
+        if outcome.interrupted:
+            print(
+                f"interrupted after {len(outcome.losses)} iterations; writing the state reached", file=out, flush=True
+            )
+        scores = _write_results(
+            folder, effect, content, target, content_full, outcome, frames, levels, size_hw, settings
+        )
+    outcome.interrupted = outcome.interrupted or interruption.received
+    print(
+        f"l1 {scores['l1']:.4f}  psnr {scores['psnr']:.2f} dB  ssim {scores['ssim']:.4f}  "
+        f"in {outcome.seconds:.1f} s; report: {folder / 'report.html'}",
+        file=out,
+    )
+    return outcome
+
+
+def _write_results(
+    folder: Path,
+    effect: Effect,
+    content: torch.Tensor,
+    target: torch.Tensor,
+    content_full: torch.Tensor,
+    outcome: Outcome,
+    frames: list,
+    levels: tuple,
+    size_hw: tuple[int, int],
+    settings: Settings,
+) -> dict:
+    """Every file of :data:`RESULT_FILES`, the resumable parameter file first; returns the scores."""
     assert outcome.result is not None
     scores = {
-        "effect": effect_name,
+        "effect": effect.name,
         "mode": settings.mode,
         "iterations": len(outcome.losses),
         "levels": describe_levels(levels),
@@ -138,12 +179,7 @@ def run(
     )
     if frames:
         write_animation(folder / "optimization.gif", frames)
-    print(
-        f"l1 {scores['l1']:.4f}  psnr {scores['psnr']:.2f} dB  ssim {scores['ssim']:.4f}  "
-        f"in {outcome.seconds:.1f} s; report: {folder / 'report.html'}",
-        file=out,
-    )
-    return outcome
+    return scores
 
 
 def transfer(

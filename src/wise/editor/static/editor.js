@@ -48,6 +48,7 @@ function setStatus() {
 function edit(request) {
   editor.pendingEdits += 1;
   $("message").hidden = true;
+  $("notice").hidden = true;
   setStatus();
   editor.queue = editor.queue
     .then(request)
@@ -92,6 +93,10 @@ function formatValue(value) {
 function applyState(state) {
   const previous = editor.server;
   editor.server = state;
+  if (state.notice) {  // said once by the server, e.g. values of an opened file that were clamped
+    $("notice").textContent = state.notice;
+    $("notice").hidden = false;
+  }
   const newEffect = !previous || previous.effect !== state.effect;
   if (newEffect) buildEffectControls(state);
   if (newEffect || !editor.param || !state.params.some((p) => p.name === editor.param)) {
@@ -328,6 +333,8 @@ function bindRange(id, unit) {
 }
 
 function init() {
+  // the access token is in a cookie now: keep it out of the address bar and the history
+  if (new URLSearchParams(location.search).has("token")) history.replaceState(null, "", location.pathname);
   $("open-image").addEventListener("change", (e) => { if (e.target.files[0]) upload("/api/image", e.target.files[0]); e.target.value = ""; });
   $("open-params").addEventListener("change", (e) => { if (e.target.files[0]) upload("/api/params", e.target.files[0]); e.target.value = ""; });
   $("effect").addEventListener("change", () => edit(() => postJSON("/api/effect", { effect: $("effect").value })));

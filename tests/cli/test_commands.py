@@ -9,10 +9,9 @@ from pathlib import Path
 
 import pytest
 import torch
-from PIL import Image
-from skimage import data
 
 import wise
+from tests.images import astronaut_png
 from wise.cli import main
 from wise.effects.base import Effect
 from wise.io import read_image
@@ -34,9 +33,7 @@ class Toon(Effect):
 
 @pytest.fixture(scope="module")
 def photo(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp("img") / "photo.png"
-    Image.fromarray(data.astronaut()).resize((64, 48), Image.Resampling.BILINEAR).save(path)
-    return path
+    return astronaut_png(tmp_path_factory.mktemp("img") / "photo.png", 64, 48)
 
 
 @pytest.fixture(scope="module")
@@ -169,8 +166,8 @@ EXTRA_CASES = {
     "non-numeric set": (["--set", "contour=lots"], "not a number"),
     "nan set": (["--set", "contour=nan"], "finite"),
     "params and preset": (["--preset", "sketch", "--params", "x.safetensors"], "cannot be combined"),
-    "bad kernel size": (["--kernel-size", "0"], "kernel size"),
-    "non-integer kernel size": (["--kernel-size", "two"], "invalid int value"),
+    "bad kernel size": (["--kernel-size", "0"], "--kernel-size: must be from 1"),
+    "non-integer kernel size": (["--kernel-size", "two"], "not a whole number"),
     "bad quality": (["--quality", "101"], "quality"),
 }
 

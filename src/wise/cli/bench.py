@@ -1,0 +1,57 @@
+"""``wise bench``: benchmarks (``recover``: the functional benchmark of the supplement)."""
+
+from __future__ import annotations
+
+import argparse
+from typing import TextIO
+
+from wise import effects
+from wise.cli import args as types
+from wise.cli.outputs import output_file
+from wise.cli.parser import add_pixel_limit, add_size, command
+from wise.optimize.benchmark import photos_in, recover
+
+IMAGE_LOSSES = ("l1", "l2")
+"""The losses the crop iterations take."""
+
+
+def run_recover(args: argparse.Namespace, out: TextIO) -> int:
+    effects.create(args.effect)
+    photos = photos_in(args.images)
+    output_file(args.json, {str(i): path for i, path in enumerate(photos)}, (".json",))
+    result = recover(
+        args.effect,
+        args.images,
+        args.trials,
+        args.size,
+        args.seed,
+        args.iters,
+        lr=args.lr,
+        loss=args.loss,
+        json_path=args.json,
+        out=out,
+    )
+    return 130 if result["interrupted"] else 0
+
+
+def register(commands: argparse._SubParsersAction) -> None:
+    bench = command(commands, "bench", "benchmarks", writes=False)
+    benches = bench.add_subparsers(dest="bench", metavar="BENCHMARK", required=True, parser_class=type(bench))
+    recover_parser = command(benches, "recover", "recover random global parameters by optimization")
+    recover_parser.add_argument("effect", metavar="EFFECT", help="effect name (see 'wise effects')")
+    recover_parser.add_argument("--images", required=True, metavar="DIR", help="folder of photos")
+    recover_parser.add_argument(
+        "--trials", type=types.trials, default=10, metavar="N", help="number of trials (default 10)"
+    )
+    add_size(recover_parser, types.working_size, "the photos")
+    recover_parser.add_argument("--seed", type=types.seed, default=0, help="seed of the random parameters")
+    recover_parser.add_argument(
+        "--iters", type=types.iterations, default=300, metavar="N", help="iterations per trial, all levels"
+    )
+    recover_parser.add_argument(
+        "--lr", type=types.positive_rate, default=0.1, help="learning rate of the coarsest level (default 0.1)"
+    )
+    recover_parser.add_argument("--loss", choices=IMAGE_LOSSES, default="l2", help="image loss (default l2)")
+    recover_parser.add_argument("--json", required=True, metavar="OUT", help="write the results here (.json)")
+    add_pixel_limit(recover_parser)
+    recover_parser.set_defaults(func=run_recover)

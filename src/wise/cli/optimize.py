@@ -1,0 +1,138 @@
+"""``wise optimize`` and ``wise transfer``: parametric style transfer into a results folder."""
+
+from __future__ import annotations
+
+import argparse
+from typing import TextIO
+
+from wise import effects
+from wise.cli import args as types
+from wise.cli.outputs import OutputFolder
+from wise.cli.parser import add_device, add_pixel_limit, add_size, command, device
+from wise.errors import WiseError
+from wise.nst import builtin_style_count
+from wise.optimize.parametric import LOSSES, MODES, PYRAMIDS, Settings
+from wise.optimize.run import NST_METHODS, RESULT_FILES, TARGET_FILE, init_is_file
+from wise.optimize.run import run as run_optimization
+from wise.optimize.run import transfer as run_transfer
+from wise.vgg import weights_file
+
+
+def _settings(args: argparse.Namespace) -> Settings:
+    return Settings(
+        mode=args.mode,
+        iterations=args.iters,
+        lr=args.lr,
+        loss=args.loss,
+        tv_weight=args.tv,
+        vgg_weights=args.vgg_weights,
+        levels=args.levels,
+    )
+
+
+def _options(args: argparse.Namespace, out: TextIO) -> dict[str, object]:
+    return {"size": args.size, "init": args.init, "seed": args.seed, "device": device(args.device), "out": out}
+
+
+def _init_input(args: argparse.Namespace) -> str | None:
+    return args.init if args.init is not None and init_is_file(args.init) else None
+
+
+def _exit_code(interrupted: bool) -> int:
+    return 130 if interrupted else 0
+
+
+def run_optimize(args: argparse.Namespace, out: TextIO) -> int:
+    effects.create(args.effect)
+    settings = _settings(args)
+    inputs = {"--content": args.content, "--target": args.target, "--init": _init_input(args)}
+    folder = OutputFolder(args.output, RESULT_FILES, inputs)
+    if settings.loss == "nst":
+        weights_file(settings.vgg_weights)
+    options = _options(args, out)
+    with folder.guard():
+        outcome = run_optimization(args.effect, args.content, args.target, args.output, settings, **options)
+    return _exit_code(outcome.interrupted)
+
+
+def run_transfer_command(args: argparse.Namespace, out: TextIO) -> int:
+    effects.create(args.effect)
+    if args.nst == "gatys" and args.style is None:
+        raise WiseError("--nst gatys needs a style image (--style IMAGE)")
+    if args.builtin_style is not None:
+        count = builtin_style_count()
+        if not 0 <= args.builtin_style < count:
+            raise WiseError(f"--builtin-style must be from 0 to {count - 1}, got {args.builtin_style}")
+    settings = _settings(args)
+    inputs = {"--content": args.content, "--style": args.style, "--init": _init_input(args)}
+    folder = OutputFolder(args.output, (*RESULT_FILES, TARGET_FILE), inputs)
+    if settings.loss == "nst" or args.nst == "gatys":
+        weights_file(settings.vgg_weights)
+    options = _options(args, out)
+    with folder.guard():
+        outcome = run_transfer(
+            args.effect,
+            args.content,
+            args.output,
+            settings,
+            builtin_style=args.builtin_style,
+            style_path=args.style,
+            method=args.nst,
+            **options,
+        )
+    return _exit_code(outcome.interrupted)
+
+
+def _add_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("-o", "--output", required=True, metavar="OUTDIR", help="folder for the results")
+    parser.add_argument("--mode", choices=MODES, default="local", help="per-pixel masks (default) or global values")
+    parser.add_argument(
+        "--iters",
+        type=types.iterations,
+        default=Settings.iterations,
+        metavar="N",
+        help=f"iterations over all levels, 1 to {types.MAX_ITERATIONS:,} (default %(default)s)",
+    )
+    parser.add_argument("--lr", type=types.positive_rate, default=Settings.lr, help="Adam learning rate (default 0.1)")
+    parser.add_argument(
+        "--levels",
+        type=int,
+        choices=sorted(PYRAMIDS),
+        default=Settings.levels,
+        help="coarse-to-fine pyramid levels (default %(default)s; 1: every iteration at --size)",
+    )
+    parser.add_argument("--loss", choices=LOSSES, default="l1", help="image loss (default l1); nst needs VGG-19")
+    parser.add_argument("--vgg-weights", metavar="FILE", help="VGG-19 weights (safetensors) for --loss nst")
+    parser.add_argument(
+        "--tv", type=types.weight, default=0.0, metavar="W", help="total-variation weight on the masks (at least 0)"
+    )
+    add_size(parser, types.working_size, "the working resolution")
+    parser.add_argument("--init", metavar="PRESET|FILE", help="start from a preset or a params file (resume)")
+    parser.add_argument(
+        "--seed", type=types.seed, default=0, help="seed of the effect's textures and of torch, 0 to 2**63-1"
+    )
+    add_device(parser)
+    add_pixel_limit(parser)
+
+
+def register(commands: argparse._SubParsersAction) -> None:
+    opt = command(commands, "optimize", "optimize parameters so that an effect re-creates a target image")
+    opt.add_argument("effect", metavar="EFFECT", help="effect name (see 'wise effects')")
+    opt.add_argument("--content", required=True, metavar="IMAGE", help="the photo to stylize")
+    opt.add_argument("--target", required=True, metavar="IMAGE", help="the stylized reference to re-create")
+    _add_options(opt)
+    opt.set_defaults(func=run_optimize)
+
+    transfer = command(commands, "transfer", "neural style transfer, then re-create it with an effect")
+    transfer.add_argument("effect", metavar="EFFECT", help="effect name (see 'wise effects')")
+    transfer.add_argument("--content", required=True, metavar="IMAGE", help="the photo to stylize")
+    style = transfer.add_mutually_exclusive_group(required=True)
+    style.add_argument("--style", metavar="IMAGE", help="a style image (any painting or drawing)")
+    style.add_argument(
+        "--builtin-style", type=types.whole_number(0, 10_000), metavar="K", help="one of the built-in styles, 0 to 25"
+    )
+    transfer.add_argument(
+        "--nst", choices=NST_METHODS, default="onnx", help="onnx networks (default) or gatys (needs VGG-19 weights)"
+    )
+    _add_options(transfer)
+    transfer.set_defaults(func=run_transfer_command)

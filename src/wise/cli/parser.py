@@ -1,0 +1,79 @@
+"""The argument parser of every command: one-line usage errors, shared options."""
+
+from __future__ import annotations
+
+import argparse
+import os
+from typing import NoReturn
+
+import torch
+
+from wise.cli import args as types
+from wise.cli.outputs import OVERWRITE_RULE
+from wise.errors import WiseError
+from wise.io import DEFAULT_MAX_PIXELS, MAX_PIXELS_ENV
+
+PROG = "wise"
+EXIT_USAGE = 2
+DEVICES = ("auto", "cpu", "cuda")
+
+
+def one_line(text: object) -> str:
+    return " ".join(str(text).split())
+
+
+class Parser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are a single ``wise: error:`` line (exit code 2)."""
+
+    def error(self, message: str) -> NoReturn:
+        hint = f" (see '{self.prog} --help')"
+        self.exit(EXIT_USAGE, f"{PROG}: error: {one_line(message)}{hint}\n")
+
+
+def command(commands: argparse._SubParsersAction, name: str, help: str, writes: bool = True) -> argparse.ArgumentParser:
+    """A sub-command; those that write files state the overwrite rule in their help."""
+    return commands.add_parser(
+        name, help=help, description=help[:1].upper() + help[1:] + ".", epilog=OVERWRITE_RULE if writes else None
+    )
+
+
+def add_device(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--device", choices=DEVICES, default="auto", help="default: cuda if available")
+
+
+def add_size(parser: argparse.ArgumentParser, parse: types.WholeNumber, what: str, default: int = 512) -> None:
+    """``--size PX``: a short side in pixels, within the bounds of ``parse``."""
+    parser.add_argument(
+        "--size",
+        type=parse,
+        default=default,
+        metavar="PX",
+        help=f"short side of {what}, {parse.minimum} to {parse.maximum} (default {default})",
+    )
+
+
+def add_pixel_limit(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--max-pixels",
+        type=types.pixel_limit,
+        metavar="N",
+        help=f"refuse images with more pixels (default {DEFAULT_MAX_PIXELS:,}, or ${MAX_PIXELS_ENV})",
+    )
+
+
+def device(name: str) -> torch.device:
+    """``--device``: cuda, cpu, or auto (cuda when available)."""
+    if name == "cuda" and not torch.cuda.is_available():
+        raise WiseError("--device cuda: CUDA is not available; use --device cpu")
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    return torch.device(name)
+
+
+def apply_pixel_limit(namespace: argparse.Namespace) -> str | None:
+    """Make ``--max-pixels`` the process's limit; returns the previous value of the variable."""
+    previous = os.environ.get(MAX_PIXELS_ENV)
+    limit = getattr(namespace, "max_pixels", None)
+    if limit is not None:
+        os.environ[MAX_PIXELS_ENV] = str(limit)
+    return previous
