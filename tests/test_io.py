@@ -23,7 +23,9 @@ from skimage import data
 
 import wise.io as wio
 from wise.errors import WiseError
-from wise.io import decode_image_bytes, image_to_tensor, read_image, tensor_to_image, write_image
+from wise.io import decode_image_bytes, formats, image_to_tensor, read_image, tensor_to_image, write_image
+from wise.io import read as io_read
+from wise.io import write as io_write
 
 
 @pytest.fixture(scope="module")
@@ -156,7 +158,7 @@ def test_corrupt_16bit_colour_png_refused(tmp_path: Path) -> None:
     data = (tmp_path / "good.png").read_bytes()
     bad = tmp_path / "bad.png"
     bad.write_bytes(data[: len(data) // 2])
-    assert wio._needs_pypng(bad.read_bytes())
+    assert formats.needs_pypng(bad.read_bytes())
     expect_error(bad, "corrupt")
     flipped = bytearray(data)
     flipped[len(data) // 2] ^= 0xFF
@@ -296,7 +298,7 @@ def test_unwritable_directory(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -
     def refuse(*args: object, **kwargs: object) -> tuple[int, str]:
         raise PermissionError(13, "Permission denied")
 
-    monkeypatch.setattr(wio.tempfile, "mkstemp", refuse)
+    monkeypatch.setattr(io_write.tempfile, "mkstemp", refuse)
     with pytest.raises(WiseError, match="cannot write"):
         write_image(torch.rand(1, 3, 8, 8), tmp_path / "a.png")
     assert list(tmp_path.iterdir()) == []
@@ -337,7 +339,7 @@ def png_bytes(width: int, height: int, depth: int = 8, colour: int = 2, idat: by
     """A PNG whose IHDR (with a valid CRC) claims ``width`` x ``height``, with little or no image data."""
     ihdr = struct.pack(">IIBBBBB", width, height, depth, colour, 0, 0, 0)
     data = zlib.compress(bytes(64)) if idat is None else idat
-    return wio._PNG_MAGIC + png_chunk(b"IHDR", ihdr) + png_chunk(b"IDAT", data) + png_chunk(b"IEND", b"")
+    return formats._PNG_MAGIC + png_chunk(b"IHDR", ihdr) + png_chunk(b"IDAT", data) + png_chunk(b"IEND", b"")
 
 
 def jpeg_claiming(photo: np.ndarray, width: int, height: int) -> bytes:
@@ -420,10 +422,10 @@ PILLOW_LIMIT = Image.MAX_IMAGE_PIXELS
 def test_the_pypng_and_tifffile_paths_check_the_header_too(tmp_path: Path, photo: np.ndarray) -> None:
     data = png_bytes(300, 200, depth=16, colour=6)
     with pytest.raises(WiseError, match=r"x: 300x200 pixels \(0\.06 megapixels\) is more than the limit of 1e-05"):
-        wio._pypng_array(io.BytesIO(data), data[:64], "x", 10)
+        formats.pypng_array(io.BytesIO(data), data[:64], "x", 10)
     tiff = tiff_bytes(ramp16()[..., None].repeat(3, axis=2), photometric="rgb")
     with pytest.raises(WiseError, match=r"x: 40x32 pixels"):
-        wio._tifffile_array(io.BytesIO(tiff), "x", 10)
+        formats.tifffile_array(io.BytesIO(tiff), "x", 10)
 
 
 def test_pillow_does_not_check_or_warn_first(tmp_path: Path) -> None:
@@ -473,7 +475,7 @@ def test_special_files_and_size_limit(tmp_path: Path, monkeypatch: pytest.Monkey
         start = time.perf_counter()
         expect_error(path, words, "not a regular file")
         assert time.perf_counter() - start < 1.0
-    monkeypatch.setattr(wio, "MAX_IMAGE_BYTES", 100)
+    monkeypatch.setattr(io_read, "MAX_IMAGE_BYTES", 100)
     (tmp_path / "big.png").write_bytes(png_bytes(8, 8) + bytes(200))
     expect_error(tmp_path / "big.png", "MB is more than the limit")
     with pytest.raises(WiseError, match="upload.png: 0.0 MB is more than the limit"):

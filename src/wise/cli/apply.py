@@ -58,7 +58,7 @@ def run_apply(args: argparse.Namespace, out: TextIO) -> int:
     params = params.clone()
     for index, value in (parse_set(item, effect) for item in args.set):
         params[:, index] = value
-    output = output_file(args.output, {"INPUT": args.input, "--params": args.params}, WRITE_FORMATS)
+    output = output_file(args.output, {"image": args.input, "--params": args.params}, WRITE_FORMATS)
     target_device = device(args.device)
     image = read_image(args.input)
     result = render(effect.to(target_device).eval(), image, params, device=target_device)
@@ -70,7 +70,7 @@ def run_gallery(args: argparse.Namespace, out: TextIO) -> int:
     names = args.effects or effects.available()
     for name in names:
         effects.create(name)  # unknown names fail before any work
-    output = output_file(args.output, {"INPUT": args.input}, WRITE_FORMATS)
+    output = output_file(args.output, {"image": args.input}, WRITE_FORMATS)
     target_device = device(args.device)
     image = read_image(args.input)
 

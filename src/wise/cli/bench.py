@@ -18,7 +18,7 @@ IMAGE_LOSSES = ("l1", "l2")
 def run_recover(args: argparse.Namespace, out: TextIO) -> int:
     effects.create(args.effect)
     photos = photos_in(args.images)
-    output_file(args.json, {str(i): path for i, path in enumerate(photos)}, (".json",))
+    output_file(args.json, {f"photo {path.name}": path for path in photos}, (".json",))
     result = recover(
         args.effect,
         args.images,
