@@ -55,9 +55,11 @@ def _wait_for(proc: subprocess.Popen[str], words: str, timeout: float = 120.0) -
 
 
 def _interrupt(proc: subprocess.Popen[str]) -> tuple[int, float, str]:
+    """SIGINT; the exit code and seconds to exit. stderr must be the one line saying so."""
     start = time.monotonic()
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=60)
+    assert err.splitlines() == ["wise: interrupted"], err
     return proc.returncode, time.monotonic() - start, err
 
 

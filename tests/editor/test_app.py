@@ -335,6 +335,8 @@ def test_values_clamped_in_an_opened_file_are_noted_once(client: TestClient, tmp
 # ----- bad inputs of every route: status, a one-line detail, the session unchanged ------------------
 
 TIFF_JUNK = b"II*\x00" + b"\x00" * 64
+REFUSAL_SECONDS = 1.0
+"""A refusal comes before any decoding or rendering work."""
 BAD_INPUTS = [
     ("GET", "/", {"headers": {"Host": "attacker.example"}}, 403, "DNS-rebinding"),
     ("GET", "/static/missing.js", {}, 404, "Not Found"),
@@ -391,9 +393,12 @@ def test_bad_inputs_of_every_route(
         args["headers"] = {"Content-Type": "application/json"}
     args.setdefault("headers", {}).setdefault("X-File-Name", "bad.png")
     before = client.get("/api/state").json()
+    start = time.perf_counter()
     response = client.request(method, path, **args)
+    seconds = time.perf_counter() - start
     detail = response.json()["detail"]
     assert response.status_code == status, detail
+    assert seconds < REFUSAL_SECONDS, f"refused after {seconds:.2f} s"
     assert message in detail and "\n" not in detail and "Traceback" not in detail
     assert "wise-edit-" not in detail  # no server paths in messages
     assert client.get("/api/state").json() == before

@@ -53,7 +53,10 @@ def _show_warning(err: TextIO):
 
 def _run(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     try:
-        return int(args.func(args, out))
+        code = int(args.func(args, out))
+        if code == EXIT_INTERRUPTED:  # stopped by Ctrl-C, its results written
+            print(f"{PROG}: interrupted", file=err, flush=True)
+        return code
     except WiseError as e:
         _error(str(e), err)
     except OSError as e:
