@@ -223,4 +223,4 @@ def test_edge_darkening_is_resolution_independent() -> None:
     large = torch.nn.functional.interpolate(small, scale_factor=2, mode="nearest")
     darkest_small = float((edge_darkening(small, 2.0, sigma=2.0, scale=1.0) - small).min())
     darkest_large = float((edge_darkening(large, 2.0, sigma=2.0, scale=2.0) - large).min())
-    assert darkest_large == pytest.approx(darkest_small, rel=0.1)
+    assert darkest_large == pytest.approx(darkest_small, rel=0.15)

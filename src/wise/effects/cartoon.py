@@ -72,6 +72,18 @@ class Cartoon(Effect):
             "contour": 1.5,
             "blackness": 0.3,
         },
+        "pastel": {
+            "brightness": 0.15,
+            "contrast": 0.9,
+            "saturation": 1.1,
+            "gamma": 1.2,
+            "details": 1.6,
+            "bins": 6.0,
+            "softness": 0.5,
+            "stroke_width": 0.45,
+            "contour": 0.6,
+            "blackness": 0.1,
+        },
     }
 
     def halo(self, scale: float) -> int:

@@ -16,6 +16,7 @@ from wise.filters import (
     gradient_direction,
     lab_to_rgb,
     oriented_bilateral,
+    relaxed_structure_tensor,
     rgb_to_lab,
     smoothed_structure_tensor,
 )
@@ -30,6 +31,16 @@ FLOW_DERIVATIVE = 1.0
 """Derivative scale of the structure tensor (reference pixels)."""
 FLOW_SMOOTHING = 4.0
 """Smoothing of the structure tensor: brush strokes follow a smooth flow (reference pixels)."""
+RELAX_SIGMA = 24.0
+"""Reach of the flow relaxation (reference pixels): flat regions take the direction of the
+strong edges within about this distance."""
+RELAX_THRESHOLD = 16.0
+"""Anisotropy (CIE L* per reference pixel, squared) below which the local flow is mostly
+replaced: skin, sky and walls have less, the contours of shapes far more."""
+RELAX_GAIN = 8.0
+"""Weight of the spread strong structure against the weak local one."""
+DEFAULT_STROKE_ANGLE = math.pi / 4
+"""Gradient angle of the flow where no structure is near: diagonal strokes, lower left to upper right."""
 ABSTRACTION_FACTOR = 2
 """The colour abstraction runs at 1/2 resolution and is joint-bilaterally upsampled."""
 UPSAMPLING_RANGE = 12.0
@@ -107,6 +118,18 @@ class OilPaint(Effect):
             "shininess": 25.0,
             "edge_enhancement": 0.3,
         },
+        "knife": {
+            "brightness": 0.03,
+            "contrast": 1.15,
+            "saturation": 1.25,
+            "details": 0.6,
+            "stroke_length": 10.0,
+            "brush_size": 2.0,
+            "relief": 1.0,
+            "specular": 0.45,
+            "shininess": 8.0,
+            "edge_enhancement": 0.4,
+        },
     }
 
     def __init__(self, kernel_size: int = 3, checkpoint: bool = False, seed: int = 0) -> None:
@@ -114,7 +137,7 @@ class OilPaint(Effect):
         self.seed = seed
 
     def halo(self, scale: float) -> int:
-        flow_reach = (FLOW_DERIVATIVE + SUPPORT * FLOW_SMOOTHING) * scale
+        flow_reach = (FLOW_DERIVATIVE + SUPPORT * (FLOW_SMOOTHING + RELAX_SIGMA)) * scale
         stroke_spec, brush_spec = self.spec("stroke_length"), self.spec("brush_size")
         texture_reach = SUPPORT * (stroke_spec.max + brush_spec.max) * scale
         abstraction_reach = ABSTRACTION_FACTOR * (2 * 2 * 2 * self.kernel_size * math.sqrt(2.0) + 4)
@@ -137,7 +160,16 @@ class OilPaint(Effect):
 
         adjusted = self.recomputed(adjust_color, image, **colour_adjustments(p))
         lab = self.recomputed(rgb_to_lab, adjusted)
-        structure = self.stage(smoothed_structure_tensor, lab[:, :1], FLOW_DERIVATIVE, FLOW_SMOOTHING, scale)
+        local = self.stage(smoothed_structure_tensor, lab[:, :1], FLOW_DERIVATIVE, FLOW_SMOOTHING, scale)
+        structure = self.stage(
+            relaxed_structure_tensor,
+            local * (scale * scale),
+            RELAX_SIGMA,
+            RELAX_THRESHOLD,
+            RELAX_GAIN,
+            DEFAULT_STROKE_ANGLE,
+            scale,
+        )
         tangent = self.stage(edge_tangent_flow, structure)
 
         low_lab = downsample(lab, ABSTRACTION_FACTOR)

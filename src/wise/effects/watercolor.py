@@ -22,7 +22,15 @@ from wise.filters.gaussian import SUPPORT
 from wise.filters.kuwahara import anisotropic_kuwahara
 from wise.filters.noise import paper_texture, value_noise
 from wise.filters.upsample import downsample, joint_bilateral_upsample
-from wise.filters.watercolor import edge_darkening, gaps_overlaps, pigment_density, wet_in_wet, wobble
+from wise.filters.watercolor import (
+    edge_darkening,
+    flat_washes,
+    gaps_overlaps,
+    paper_shading,
+    pigment_density,
+    wet_in_wet,
+    wobble,
+)
 from wise.params import ParamSpec
 
 FLOW_DERIVATIVE = 1.0
@@ -44,6 +52,11 @@ CONTOUR_DETAILS = 2.0
 CONTOUR_STROKE = 0.5
 CONTOUR_STRENGTH = 1.0
 CONTOUR_THRESHOLD = 0.25
+TREMOR_CELL = 10.0
+"""Cell size of the hand tremor that wobbles the wash boundaries (reference pixels)."""
+TREMOR_AMPLITUDE = 2.0
+"""Height of the tremor added to the paper for the wobbling: about 1.5 reference pixels of
+displacement at ``wobble`` 1."""
 WOBBLE_GAIN = 8.0
 """The paper's slope is about 1/8 per reference pixel: one unit of ``wobble`` then shifts the
 washes by about one reference pixel."""
@@ -70,9 +83,10 @@ class Watercolor(Effect):
     into the paper.
 
     Pipeline: colour adjustment -> structure tensor and flow -> anisotropic Kuwahara
-    abstraction -> wet-in-wet bleeding across edges -> wobbling by the paper texture -> edge
-    darkening -> pigment turbulence, dispersion and paper granulation (pigment density) ->
-    gaps and overlaps at edges -> pencil contours (flow-based XDoG) multiplied on top.
+    abstraction -> wet-in-wet bleeding across edges -> flat washes (soft tone quantization)
+    -> wobbling by the paper texture and hand tremor -> edge darkening -> pigment
+    turbulence, dispersion and paper granulation (pigment density) -> gaps and overlaps at
+    edges -> paper shading -> pencil contours (flow-based XDoG) multiplied on top.
     """
 
     name = "watercolor"
@@ -83,6 +97,7 @@ class Watercolor(Effect):
         ParamSpec("temperature", -0.5, 0.5, 0.0, "white balance: warmer (positive) or cooler colours"),
         ParamSpec("tint", -0.5, 0.5, 0.0, "white balance: magenta (positive) or green tint"),
         ParamSpec("abstraction", 1.0, 8.0, 4.0, "radius of the Kuwahara washes"),
+        ParamSpec("flatness", 0.0, 1.0, 0.5, "flat washes of even tone (1) or smooth shading (0)"),
         ParamSpec("bleeding", 0.0, 8.0, 3.0, "how far colours bleed across wet edges"),
         ParamSpec("wobble", 0.0, 3.0, 1.0, "displacement of the washes by the paper (reference pixels)"),
         ParamSpec("edge_darkening", 0.0, 3.0, 1.0, "pigment pooling at the edges of washes"),
@@ -90,36 +105,57 @@ class Watercolor(Effect):
         ParamSpec("dispersion", 0.0, 1.0, 0.2, "fine speckles of pigment"),
         ParamSpec("granulation", 0.0, 1.0, 0.4, "pigment settling in the paper grain"),
         ParamSpec("gaps_overlaps", -1.0, 1.0, 0.2, "paper gaps (negative) or overlaps (positive) at edges"),
+        ParamSpec("paper", 0.0, 1.0, 0.5, "visibility of the paper's grain"),
         ParamSpec("contour", 0.0, 1.0, 0.25, "opacity of the pencil contours"),
     )
     presets = {
         "wet": {
-            "brightness": 0.08,
-            "contrast": 0.95,
+            "brightness": 0.12,
+            "contrast": 0.85,
             "saturation": 1.25,
             "abstraction": 7.0,
+            "flatness": 0.7,
             "bleeding": 6.0,
-            "wobble": 1.5,
-            "edge_darkening": 1.6,
-            "turbulence": 0.5,
-            "dispersion": 0.1,
+            "wobble": 1.2,
+            "edge_darkening": 2.0,
+            "turbulence": 0.35,
+            "dispersion": 0.05,
             "granulation": 0.35,
-            "gaps_overlaps": 0.5,
+            "gaps_overlaps": 0.3,
+            "paper": 0.7,
             "contour": 0.0,
         },
         "dry": {
-            "brightness": 0.1,
-            "contrast": 1.1,
-            "saturation": 1.05,
+            "brightness": 0.12,
+            "contrast": 1.0,
+            "saturation": 1.1,
             "abstraction": 4.0,
-            "bleeding": 1.0,
+            "flatness": 0.9,
+            "bleeding": 0.5,
             "wobble": 0.8,
-            "edge_darkening": 2.6,
-            "turbulence": 0.25,
-            "dispersion": 0.25,
-            "granulation": 0.65,
+            "edge_darkening": 3.0,
+            "turbulence": 0.2,
+            "dispersion": 0.2,
+            "granulation": 0.7,
             "gaps_overlaps": -0.7,
+            "paper": 0.9,
             "contour": 0.3,
+        },
+        "pale": {
+            "brightness": 0.2,
+            "contrast": 0.75,
+            "saturation": 1.3,
+            "abstraction": 8.0,
+            "flatness": 1.0,
+            "bleeding": 3.0,
+            "wobble": 1.0,
+            "edge_darkening": 2.5,
+            "turbulence": 0.25,
+            "dispersion": 0.05,
+            "granulation": 0.4,
+            "gaps_overlaps": -0.5,
+            "paper": 0.8,
+            "contour": 0.0,
         },
     }
 
@@ -182,10 +218,12 @@ class Watercolor(Effect):
         paper = paper_texture(luminance, seed, origin=origin, scale=scale)
         turbulence_noise = value_noise(luminance, TURBULENCE_CELL, seed + 1, octaves=3, origin=origin, scale=scale)
         dispersion_noise = value_noise(luminance, DISPERSION_CELL, seed + 2, octaves=2, origin=origin, scale=scale)
+        tremor = value_noise(luminance, TREMOR_CELL, seed + 3, octaves=2, origin=origin, scale=scale)
 
         reduction = WASH_REDUCTION if scale >= WASH_REDUCTION_FROM_SCALE else 1
         bled = self._washes(adjusted, structure, edges, turbulence_noise, p, scale, reduction)
-        wobbled = self.stage(wobble, bled, paper, WOBBLE_GAIN * p["wobble"], scale)
+        flat = self.stage(flat_washes, bled, p["flatness"], scale=scale)
+        wobbled = self.stage(wobble, flat, paper + TREMOR_AMPLITUDE * tremor, WOBBLE_GAIN * p["wobble"], scale)
         darkened = self.stage(edge_darkening, wobbled, p["edge_darkening"], scale=scale)
         density = (
             1.0
@@ -194,7 +232,8 @@ class Watercolor(Effect):
             + GRANULATION_GAIN * p["granulation"] * (2.0 * paper - 1.0)
         )
         pigmented = self.recomputed(pigment_density, darkened, density)
-        finished = self.stage(gaps_overlaps, pigmented, edges, across, p["gaps_overlaps"], dispersion_noise, scale)
+        overlapped = self.stage(gaps_overlaps, pigmented, edges, across, p["gaps_overlaps"], dispersion_noise, scale)
+        finished = self.recomputed(paper_shading, overlapped, paper, p["paper"])
 
         if not torch.is_grad_enabled() and float(p["contour"].max()) <= 0.0:
             return finished.clamp(0.0, 1.0)  # invisible contours: skip their cost when rendering

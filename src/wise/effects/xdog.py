@@ -64,6 +64,16 @@ class XDoG(Effect):
             "blackness": 0.5,
             "shading": 0.0,
         },
+        "lines": {
+            "brightness": 0.35,
+            "contrast": 0.9,
+            "saturation": 1.0,
+            "details": 1.8,
+            "stroke_width": 0.6,
+            "contour": 2.5,
+            "blackness": 0.08,
+            "shading": 0.0,
+        },
     }
 
     def halo(self, scale: float) -> int:

@@ -18,7 +18,13 @@ from wise.filters.noise import paper_texture, value_noise
 from wise.filters.quantize import quantize
 from wise.filters.sampling import sample, tap_sum
 from wise.filters.shading import bump_phong
-from wise.filters.structure import edge_tangent_flow, gradient_direction, smoothed_structure_tensor, structure_tensor
+from wise.filters.structure import (
+    edge_tangent_flow,
+    gradient_direction,
+    relaxed_structure_tensor,
+    smoothed_structure_tensor,
+    structure_tensor,
+)
 from wise.filters.upsample import downsample, joint_bilateral_upsample
 from wise.filters.watercolor import edge_darkening, gaps_overlaps, pigment_density, wet_in_wet, wobble
 
@@ -50,6 +56,7 @@ __all__ = [
     "rgb_to_hsv",
     "rgb_to_lab",
     "sample",
+    "relaxed_structure_tensor",
     "smoothed_structure_tensor",
     "structure_tensor",
     "tap_sum",
