@@ -47,7 +47,8 @@ def test_watercolor_rim_dip_across_a_wash_boundary() -> None:
 
 def test_flat_washes_put_a_ramp_into_few_tones() -> None:
     ramp = torch.linspace(0.05, 0.95, 256).view(1, 1, 1, 256).expand(1, 3, 32, 256).contiguous()
-    smooth, flat = flat_washes(ramp, 0.0, scale=1.0), flat_washes(ramp, 1.0, scale=1.0)
+    lightness = ramp[:, :1]
+    smooth, flat = flat_washes(ramp, lightness, 0.0, scale=1.0), flat_washes(ramp, lightness, 1.0, scale=1.0)
     steps = lambda image: int((image[0, 0, 16].diff().abs() > 2e-3).sum())  # noqa: E731
     assert steps(smooth) > 200  # the shading stays a ramp
     assert steps(flat) < 120  # flat tones with steps between them

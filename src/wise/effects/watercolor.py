@@ -222,7 +222,7 @@ class Watercolor(Effect):
 
         reduction = WASH_REDUCTION if scale >= WASH_REDUCTION_FROM_SCALE else 1
         bled = self._washes(adjusted, structure, edges, turbulence_noise, p, scale, reduction)
-        flat = self.stage(flat_washes, bled, p["flatness"], scale=scale)
+        flat = self.stage(flat_washes, bled, luminance / LUMINANCE_RANGE, p["flatness"], scale=scale)
         wobbled = self.stage(wobble, flat, paper + TREMOR_AMPLITUDE * tremor, WOBBLE_GAIN * p["wobble"], scale)
         darkened = self.stage(edge_darkening, wobbled, p["edge_darkening"], scale=scale)
         density = (

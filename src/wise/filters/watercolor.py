@@ -15,7 +15,6 @@ import torch.nn.functional as F
 
 from wise.errors import WiseError
 from wise.filters._checks import ParamLike, as_map, check_image, resolution_scale
-from wise.filters.color import lab_to_rgb, rgb_to_lab
 from wise.filters.flow import check_direction
 from wise.filters.gaussian import SUPPORT, gaussian_blur
 from wise.filters.quantize import quantize
@@ -41,7 +40,6 @@ WASH_SMOOTHING = 3.0
 SOFTEST_WASH = 1.5
 SHARPEST_WASH = 0.12
 """Ramp half-widths (bin widths) of the wash quantization at flatness 0 and 1."""
-LIGHTNESS_OF_WHITE = 100.0
 PAPER_SHADE = 0.15
 """Darkening of the paper's deepest valleys at full paper visibility."""
 _SELECTION_EPS = 1e-6
@@ -264,40 +262,40 @@ def wet_in_wet(
 
 def flat_washes(
     image: torch.Tensor,
+    lightness: torch.Tensor,
     flatness: ParamLike,
     levels: float = WASH_LEVELS,
     smoothing: float = WASH_SMOOTHING,
     scale: float | None = None,
 ) -> torch.Tensor:
-    """Flat washes: the lightness of ``image`` softly quantized into ``levels`` tones.
+    """Flat washes: the tones of ``image`` moved onto ``levels`` steps of even lightness.
 
     A wash is one layer of pigment of even density, so its tone is flat and changes in steps
     where the painter laid another wash (Wang et al. 2014 segment the photo for this). The
-    CIE L*, smoothed by a Gaussian of ``smoothing`` so that the steps run along calm curves,
-    is quantized with the soft quantizer of Winnemöller et al. 2006
-    (:func:`wise.filters.quantize.quantize`) and blended in by ``flatness``; the chroma is
-    kept. The ramp between the tones is :data:`SOFTEST_WASH` bin widths at ``flatness`` 0
-    (practically the identity) and :data:`SHARPEST_WASH` at 1 (distinct steps that still
-    have a gradient).
+    ``lightness`` of the picture, smoothed by a Gaussian of ``smoothing`` so that the steps
+    run along calm curves, is quantized with the soft quantizer of Winnemöller et al. 2006
+    (:func:`wise.filters.quantize.quantize`); the colours move by the difference,
+    ``out = C + flatness * (Q(S) - S)``, so shading within a step flattens and the chroma
+    stays. The ramp between the tones is :data:`SOFTEST_WASH` bin widths at ``flatness`` 0
+    and :data:`SHARPEST_WASH` at 1 (distinct steps that still have a gradient).
 
     Args:
-        image: ``(B, 3, H, W)`` RGB colours in [0, 1].
+        image: ``(B, C, H, W)`` colours in [0, 1].
+        lightness: ``(B, 1, H, W)`` lightness in [0, 1] (CIE L* / 100) of the picture.
         flatness: in [0, 1]; a float, ``(B,)`` or ``(B, 1, H, W)``.
         levels: the number of tones.
         smoothing: sigma of the smoothing before the quantization, in pixels of a 512-pixel short side.
         scale: pixels per reference pixel (default ``min(H, W) / 512``).
 
     Returns:
-        ``(B, 3, H, W)``.
+        ``(B, C, H, W)``.
     """
-    check_image(image, channels=3)
+    check_image(image)
+    _check_map(lightness, image, "lightness")
     f = as_map(flatness, image, "flatness").clamp(0.0, 1.0)
     softness = SOFTEST_WASH + (SHARPEST_WASH - SOFTEST_WASH) * f
-    lab = rgb_to_lab(image)
-    lightness = lab[:, :1] / LIGHTNESS_OF_WHITE
     smooth = gaussian_blur(lightness, smoothing, scale=_scale(image, scale)).clamp(0.0, 1.0)
-    washes = lightness + f * (quantize(smooth, levels, softness) - lightness)
-    return lab_to_rgb(torch.cat((washes * LIGHTNESS_OF_WHITE, lab[:, 1:]), dim=1)).clamp(0.0, 1.0)
+    return (image + f * (quantize(smooth, levels, softness) - smooth)).clamp(0.0, 1.0)
 
 
 def paper_shading(image: torch.Tensor, paper: torch.Tensor, amount: ParamLike) -> torch.Tensor:
