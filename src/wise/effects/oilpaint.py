@@ -34,7 +34,7 @@ FLOW_SMOOTHING = 4.0
 RELAX_SIGMA = 24.0
 """Reach of the flow relaxation (reference pixels): flat regions take the direction of the
 strong edges within about this distance."""
-RELAX_THRESHOLD = 16.0
+RELAX_THRESHOLD = 48.0
 """Anisotropy (CIE L* per reference pixel, squared) below which the local flow is mostly
 replaced: skin, sky and walls have less, the contours of shapes far more."""
 RELAX_GAIN = 8.0
