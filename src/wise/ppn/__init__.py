@@ -1,0 +1,35 @@
+"""Parameter prediction networks (WISE Sec. 4 and the supplement's "Global PPN"): plain
+``nn.Module`` s that map a photo and a stylized example of it to an effect's normalized global
+parameters in [-0.5, 0.5]. No training loop here (see :mod:`wise.train`).
+
+- :class:`SimpleNet`: three convolution stages, one linear layer.
+- :class:`ResNetPPN`: ResNet-50 without BatchNorm on both images concatenated, a head per parameter.
+- :class:`MultiFeaturePPN`: VGG-11 on each image, compact and Gram features of every stage, a
+  head per parameter.
+
+Backbones start from random weights or from ImageNet weights the user provides
+(:mod:`wise.ppn.weights`).
+"""
+
+from __future__ import annotations
+
+from torch import nn
+
+from wise.errors import WiseError
+from wise.ppn.multifeature import MultiFeaturePPN
+from wise.ppn.resnet import ResNetPPN
+from wise.ppn.simple import SimpleNet
+
+ARCHITECTURES: dict[str, type[nn.Module]] = {"simple": SimpleNet, "resnet": ResNetPPN, "multifeature": MultiFeaturePPN}
+
+
+def create(architecture: str, params: int) -> nn.Module:
+    """A network by name (``simple``, ``resnet``, ``multifeature``) predicting ``params`` values."""
+    if architecture not in ARCHITECTURES:
+        raise WiseError(f"unknown architecture {architecture!r}; use one of {', '.join(ARCHITECTURES)}")
+    if params < 1:
+        raise WiseError(f"a network must predict at least one parameter, got {params}")
+    return ARCHITECTURES[architecture](params)
+
+
+__all__ = ["ARCHITECTURES", "MultiFeaturePPN", "ResNetPPN", "SimpleNet", "create"]
