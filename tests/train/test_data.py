@@ -1,0 +1,79 @@
+"""Training examples made on the fly, the validation split and the losses."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import torch
+from PIL import Image
+from skimage import data
+
+import wise
+from wise.errors import WiseError
+from wise.train.data import ExampleDataset, checked_photos, photo_files, read_photos, split_files
+from wise.train.losses import prediction_loss
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    root = tmp_path_factory.mktemp("photos")
+    (root / "nested").mkdir()
+    Image.fromarray(data.astronaut()).resize((96, 80)).save(root / "a.png")
+    Image.fromarray(data.rocket()).resize((90, 70)).save(root / "nested" / "b.jpg")
+    Image.fromarray(data.camera()).resize((70, 70)).save(root / "c.png")
+    (root / "broken.png").write_text("not an image")
+    (root / "notes.txt").write_text("ignored")
+    return root
+
+
+def test_photos_are_found_recursively_and_unreadable_ones_skipped(folder: Path) -> None:
+    files = photo_files(folder)
+    assert [p.name for p in files] == ["a.png", "broken.png", "c.png", "b.jpg"]
+    photos, skipped = read_photos(files, min_side=64)
+    assert len(photos) == 3 and [p.name for p in skipped] == ["broken.png"]
+    with pytest.raises(WiseError, match="not a directory"):
+        photo_files(folder / "missing")
+    with pytest.raises(
+        WiseError, match="3 readable photos of at least 64 pixels a side \\(1 skipped\\); training needs at least 4"
+    ):
+        checked_photos(folder, files, 64)
+
+
+def test_validation_photos_are_never_training_photos(folder: Path) -> None:
+    files = photo_files(folder)
+    train, validation = split_files(files, 0.25, seed=0)
+    assert len(validation) == 1 and not set(train) & set(validation) and len(train) + 1 == len(files)
+
+
+@pytest.mark.parametrize("sampling", ["uniform", "presets"])
+def test_examples_are_reproducible_renders_of_random_crops(folder: Path, sampling: str) -> None:
+    photos, _ = read_photos(photo_files(folder), min_side=64)
+    dataset = ExampleDataset(photos, "xdog", size=48, length=6, sampling=sampling, seed=3)
+    first, again, other = dataset[2], dataset[2], dataset[3]
+    assert first["photo"].shape == first["example"].shape == (3, 48, 48)
+    assert torch.equal(first["example"], again["example"]) and torch.equal(first["params"], again["params"])
+    assert not torch.equal(first["params"], other["params"])
+    assert float(first["params"].abs().max()) <= 0.5
+    effect = wise.effects.create("xdog")
+    with torch.no_grad():
+        rendered = effect(first["photo"][None], first["params"][None])[0]
+    assert torch.allclose(rendered.clamp(0, 1), first["example"], atol=1e-5)
+    with pytest.raises(IndexError):
+        dataset[6]
+
+
+def test_losses_in_parameter_and_image_space() -> None:
+    effect = wise.effects.create("xdog")
+    photo = torch.rand(2, 3, 32, 32)
+    truth = torch.rand(2, len(effect.param_specs)) - 0.5
+    with torch.no_grad():
+        example = effect(photo, truth)
+    assert float(prediction_loss("param-l1", truth, truth)) == 0.0
+    assert float(prediction_loss("image-l2", truth, truth, effect, photo, example)) < 1e-10
+    predicted = torch.zeros_like(truth, requires_grad=True)
+    loss = prediction_loss("image-l1", predicted, truth, effect, photo, example)
+    loss.backward()
+    assert float(loss.detach()) > 0 and predicted.grad is not None and float(predicted.grad.abs().sum()) > 0
+    with pytest.raises(WiseError, match="unknown loss"):
+        prediction_loss("perceptual", truth, truth)
