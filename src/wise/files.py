@@ -251,6 +251,15 @@ def _parse_header(
     return HEADER_LENGTH_BYTES + length, entries, metadata
 
 
+def safetensors_path(path: PathLike, what: str) -> Path:
+    """``path`` when it names a ``.safetensors`` file; pickled files (``.pth``, ``.pt``) can run code
+    and are never loaded."""
+    path = Path(path)
+    if path.suffix != ".safetensors":
+        raise WiseError(f"{path}: {what} must be a .safetensors file (pickled .pth files are not loaded)")
+    return path
+
+
 def read_safetensors_header(path: PathLike, what: str, max_bytes: int) -> tuple[dict[str, TensorEntry], dict[str, str]]:
     """The checked tensor entries and metadata of a safetensors file, without reading any tensor data."""
     path = Path(path)

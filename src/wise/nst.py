@@ -32,6 +32,13 @@ def builtin_style_count() -> int:
     return int(_engine().NUM_STYLES)
 
 
+def check_builtin_style(index: int) -> None:
+    """Refuse a built-in style index the style networks do not have."""
+    count = builtin_style_count()
+    if not 0 <= index < count:
+        raise WiseError(f"--builtin-style must be from 0 to {count - 1}, got {index}")
+
+
 def stylize(content: torch.Tensor, builtin_style: int | None = None, style: torch.Tensor | None = None) -> torch.Tensor:
     """A neural style transfer of ``content`` (1, 3, H, W) with a built-in style index or a style
     image (1, 3, h, w); returns (1, 3, H, W) in [0, 1]."""
@@ -44,9 +51,7 @@ def stylize(content: torch.Tensor, builtin_style: int | None = None, style: torc
     photo = Image.fromarray(tensor_to_image(content))
     try:
         if builtin_style is not None:
-            count = int(engine.NUM_STYLES)
-            if not 0 <= builtin_style < count:
-                raise WiseError(f"built-in style must be from 0 to {count - 1}, got {builtin_style}")
+            check_builtin_style(builtin_style)
             result = transfer.stylize(photo, style=builtin_style)
         else:
             assert style is not None

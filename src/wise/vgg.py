@@ -15,7 +15,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from wise.errors import WiseError
-from wise.files import MAX_MODEL_BYTES, read_safetensors, read_safetensors_header
+from wise.files import MAX_MODEL_BYTES, read_safetensors, read_safetensors_header, safetensors_path
 
 DEFAULT_WEIGHTS = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "wise" / "vgg19.safetensors"
 CHANNELS = (
@@ -121,8 +121,7 @@ def weights_file(path: str | os.PathLike[str] | None = None) -> Path:
     file = Path(path) if path is not None else DEFAULT_WEIGHTS
     if not os.path.lexists(file):
         raise WiseError(f"VGG-19 weights not found at {file}; {PASS_WEIGHTS} or put that file at {DEFAULT_WEIGHTS}")
-    if file.suffix != ".safetensors":
-        raise WiseError(f"{file}: VGG weights must be a .safetensors file (pickled .pth files are not loaded)")
+    safetensors_path(file, "VGG weights")
     entries, _ = read_safetensors_header(file, WHAT, MAX_MODEL_BYTES)
     shapes = expected_shapes()
     missing = [key for key in shapes if key not in entries]

@@ -19,12 +19,10 @@ import torch
 
 from wise import __version__
 from wise.cli import apply, bench, edit, effects, optimize
-from wise.cli.parser import EXIT_USAGE, PROG, Parser, apply_pixel_limit, one_line
+from wise.cli.parser import EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_USAGE, PROG, Parser, apply_pixel_limit, one_line
 from wise.errors import WiseError, WiseWarning
 from wise.io import MAX_PIXELS_ENV
 
-EXIT_INTERRUPTED = 130
-EXIT_FAILURE = 1
 COMMAND_GROUPS = (effects, apply, optimize, edit, bench)
 
 

@@ -10,6 +10,7 @@ import numpy as np
 
 from wise import effects
 from wise.cli import args as types
+from wise.cli.effects import fmt
 from wise.cli.outputs import output_file
 from wise.cli.parser import add_device, add_pixel_limit, add_size, command, device
 from wise.effects.base import Effect
@@ -18,10 +19,6 @@ from wise.gallery import make_sheet
 from wise.io import WRITE_FORMATS, image_to_tensor, read_image, write_image
 from wise.paramfile import load_params
 from wise.render import render
-
-
-def _fmt(value: float) -> str:
-    return f"{value:.6g}"
 
 
 def parse_set(item: str, effect: Effect) -> tuple[int, float]:
@@ -38,7 +35,7 @@ def parse_set(item: str, effect: Effect) -> tuple[int, float]:
     if not math.isfinite(value):
         raise WiseError(f"--set {name}={text}: the value must be a finite number")
     if not spec.in_range(value):
-        raise WiseError(f"--set {name}={text}: outside the range [{_fmt(spec.min)}, {_fmt(spec.max)}] of {name}")
+        raise WiseError(f"--set {name}={text}: outside the range [{fmt(spec.min)}, {fmt(spec.max)}] of {name}")
     return effect.param_names.index(name), spec.to_normalized(value)
 
 

@@ -8,7 +8,7 @@ from typing import TextIO
 from wise import effects
 from wise.cli import args as types
 from wise.cli.outputs import output_file
-from wise.cli.parser import add_pixel_limit, add_size, command
+from wise.cli.parser import add_pixel_limit, add_size, command, exit_code
 from wise.optimize.benchmark import photos_in, recover
 
 IMAGE_LOSSES = ("l1", "l2")
@@ -31,7 +31,7 @@ def run_recover(args: argparse.Namespace, out: TextIO) -> int:
         json_path=args.json,
         out=out,
     )
-    return 130 if result["interrupted"] else 0
+    return exit_code(result["interrupted"])
 
 
 def register(commands: argparse._SubParsersAction) -> None:

@@ -8,14 +8,11 @@ from typing import TextIO
 from wise import effects
 from wise.cli import args as types
 from wise.cli.outputs import OutputFolder
-from wise.cli.parser import add_device, add_pixel_limit, add_size, command, device
-from wise.errors import WiseError
-from wise.nst import builtin_style_count
+from wise.cli.parser import add_device, add_pixel_limit, add_size, command, device, exit_code
 from wise.optimize.parametric import LOSSES, MODES, PYRAMIDS, Settings
 from wise.optimize.run import NST_METHODS, RESULT_FILES, TARGET_FILE, init_is_file
 from wise.optimize.run import run as run_optimization
 from wise.optimize.run import transfer as run_transfer
-from wise.vgg import weights_file
 
 
 def _settings(args: argparse.Namespace) -> Settings:
@@ -38,36 +35,22 @@ def _init_input(args: argparse.Namespace) -> str | None:
     return args.init if args.init is not None and init_is_file(args.init) else None
 
 
-def _exit_code(interrupted: bool) -> int:
-    return 130 if interrupted else 0
-
-
 def run_optimize(args: argparse.Namespace, out: TextIO) -> int:
     effects.create(args.effect)
     settings = _settings(args)
     inputs = {"--content": args.content, "--target": args.target, "--init": _init_input(args)}
     folder = OutputFolder(args.output, RESULT_FILES, inputs)
-    if settings.loss == "nst":
-        weights_file(settings.vgg_weights)
     options = _options(args, out)
     with folder.guard():
         outcome = run_optimization(args.effect, args.content, args.target, args.output, settings, **options)
-    return _exit_code(outcome.interrupted)
+    return exit_code(outcome.interrupted)
 
 
 def run_transfer_command(args: argparse.Namespace, out: TextIO) -> int:
     effects.create(args.effect)
-    if args.nst == "gatys" and args.style is None:
-        raise WiseError("--nst gatys needs a style image (--style IMAGE)")
-    if args.builtin_style is not None:
-        count = builtin_style_count()
-        if not 0 <= args.builtin_style < count:
-            raise WiseError(f"--builtin-style must be from 0 to {count - 1}, got {args.builtin_style}")
     settings = _settings(args)
     inputs = {"--content": args.content, "--style": args.style, "--init": _init_input(args)}
     folder = OutputFolder(args.output, (*RESULT_FILES, TARGET_FILE), inputs)
-    if settings.loss == "nst" or args.nst == "gatys":
-        weights_file(settings.vgg_weights)
     options = _options(args, out)
     with folder.guard():
         outcome = run_transfer(
@@ -80,7 +63,7 @@ def run_transfer_command(args: argparse.Namespace, out: TextIO) -> int:
             method=args.nst,
             **options,
         )
-    return _exit_code(outcome.interrupted)
+    return exit_code(outcome.interrupted)
 
 
 def _add_options(parser: argparse.ArgumentParser) -> None:

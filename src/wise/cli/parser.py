@@ -15,6 +15,8 @@ from wise.io import DEFAULT_MAX_PIXELS, MAX_PIXELS_ENV
 
 PROG = "wise"
 EXIT_USAGE = 2
+EXIT_FAILURE = 1
+EXIT_INTERRUPTED = 130
 DEVICES = ("auto", "cpu", "cuda")
 
 
@@ -35,6 +37,11 @@ def command(commands: argparse._SubParsersAction, name: str, help: str, writes: 
     return commands.add_parser(
         name, help=help, description=help[:1].upper() + help[1:] + ".", epilog=OVERWRITE_RULE if writes else None
     )
+
+
+def exit_code(interrupted: bool) -> int:
+    """A command's exit code once its results are written: 130 when Ctrl-C stopped it."""
+    return EXIT_INTERRUPTED if interrupted else 0
 
 
 def add_device(parser: argparse.ArgumentParser) -> None:

@@ -16,7 +16,7 @@ from wise.effects.base import Effect
 from wise.errors import WiseError, size_text
 from wise.interrupt import ctrl_c
 from wise.io import atomic_path, read_image, tensor_to_image, write_image
-from wise.nst import stylize, stylize_gatys
+from wise.nst import check_builtin_style, stylize, stylize_gatys
 from wise.optimize.parametric import Outcome, Settings, describe_levels, optimize_coarse_to_fine, pyramid
 from wise.optimize.report import write_animation, write_report
 from wise.paramfile import load_params, save_params
@@ -202,7 +202,9 @@ def transfer(
         raise WiseError(f"unknown style transfer method {method!r}; use one of {', '.join(NST_METHODS)}")
     if method == "gatys" and style_path is None:
         raise WiseError("--nst gatys needs a style image (--style IMAGE)")
-    if method == "gatys":
+    if builtin_style is not None:
+        check_builtin_style(builtin_style)
+    if method == "gatys" or settings.loss == "nst":
         weights_file(settings.vgg_weights)
     content = read_image(content_path)
     style = read_image(style_path) if style_path is not None else None

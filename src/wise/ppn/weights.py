@@ -13,7 +13,7 @@ import torch
 from torch import nn
 
 from wise.errors import WiseError
-from wise.files import MAX_MODEL_BYTES, read_safetensors
+from wise.files import MAX_MODEL_BYTES, read_safetensors, safetensors_path
 from wise.ppn.multifeature import MultiFeaturePPN
 from wise.ppn.resnet import ResNetPPN
 
@@ -22,9 +22,7 @@ BATCHNORM_EPS = 1e-5
 
 
 def _tensors(path: str | os.PathLike[str], what: str) -> dict[str, torch.Tensor]:
-    if not str(path).endswith(".safetensors"):
-        raise WiseError(f"{path}: {what} must be a .safetensors file (pickled .pth files are not loaded)")
-    tensors, _ = read_safetensors(path, what, MAX_MODEL_BYTES)
+    tensors, _ = read_safetensors(safetensors_path(path, what), what, MAX_MODEL_BYTES)
     return tensors
 
 
