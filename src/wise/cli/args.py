@@ -82,3 +82,8 @@ kernel_size = whole_number(1, MAX_KERNEL_SIZE)
 quality = whole_number(1, 100)
 port = whole_number(1, 65535)
 pixel_limit = whole_number(1, MAX_PIXEL_LIMIT)
+training_seed = whole_number(0, 2**32 - 1)
+"""A training run's seed (Lightning seeds every generator from a 32-bit value)."""
+batch = whole_number(1, 4096)
+examples = whole_number(1, 10_000_000)
+processes = whole_number(1, 4096)

@@ -8,8 +8,9 @@ from typing import TextIO
 from wise import effects
 from wise.cli import args as types
 from wise.cli.outputs import output_file
-from wise.cli.parser import add_pixel_limit, add_size, command, exit_code
+from wise.cli.parser import add_device, add_pixel_limit, add_size, command, device, exit_code
 from wise.optimize.benchmark import photos_in, recover
+from wise.ppn.modelfile import resolve_model
 
 IMAGE_LOSSES = ("l1", "l2")
 """The losses the crop iterations take."""
@@ -30,6 +31,20 @@ def run_recover(args: argparse.Namespace, out: TextIO) -> int:
         loss=args.loss,
         json_path=args.json,
         out=out,
+    )
+    return exit_code(result["interrupted"])
+
+
+def run_ppn(args: argparse.Namespace, out: TextIO) -> int:
+    from wise.optimize.ppn_benchmark import bench_ppn
+
+    effects.create(args.effect)
+    resolve_model(args.model, args.effect)
+    photos = photos_in(args.images)
+    inputs = {f"photo {path.name}": path for path in photos}
+    output_file(args.json, {**inputs, "--model": args.model}, (".json",))
+    result = bench_ppn(
+        args.effect, args.images, args.model, args.trials, args.size, args.seed, args.json, device(args.device), out
     )
     return exit_code(result["interrupted"])
 
@@ -55,3 +70,19 @@ def register(commands: argparse._SubParsersAction) -> None:
     recover_parser.add_argument("--json", required=True, metavar="OUT", help="write the results here (.json)")
     add_pixel_limit(recover_parser)
     recover_parser.set_defaults(func=run_recover)
+
+    ppn_parser = command(benches, "ppn", "predict random global parameters with a trained model")
+    ppn_parser.add_argument("effect", metavar="EFFECT", help="effect name (see 'wise effects')")
+    ppn_parser.add_argument("--images", required=True, metavar="DIR", help="folder of photos")
+    ppn_parser.add_argument(
+        "--model", metavar="FILE", help="a model of 'wise train global' (default: the built-in one)"
+    )
+    ppn_parser.add_argument(
+        "--trials", type=types.trials, default=20, metavar="N", help="number of trials (default 20)"
+    )
+    add_size(ppn_parser, types.working_size, "the photos")
+    ppn_parser.add_argument("--seed", type=types.seed, default=0, help="seed of the random parameters")
+    ppn_parser.add_argument("--json", required=True, metavar="OUT", help="write the results here (.json)")
+    add_device(ppn_parser)
+    add_pixel_limit(ppn_parser)
+    ppn_parser.set_defaults(func=run_ppn)

@@ -91,7 +91,7 @@ def photos_in(folder: str) -> list[Path]:
     return found
 
 
-def _content(photo: torch.Tensor, size: int) -> torch.Tensor:
+def content_at(photo: torch.Tensor, size: int) -> torch.Tensor:
     """The photo with its short side at ``size``."""
     factor = size / min(photo.shape[-2:])
     shape = (max(8, round(photo.shape[-2] * factor)), max(8, round(photo.shape[-1] * factor)))
@@ -139,7 +139,7 @@ def recover(
         raise WiseError(f"--trials must be at least 1, got {trials}")
     effect = effects.create(effect_name)
     photos = photos_in(images_dir)[:trials]
-    contents = {path: _content(read_image(path), size) for path in photos}
+    contents = {path: content_at(read_image(path), size) for path in photos}
     generator = torch.Generator().manual_seed(seed)
     levels, crops = schedule(iterations, lr, loss)
     rows: list[dict] = []

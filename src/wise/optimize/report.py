@@ -76,7 +76,7 @@ def heatmap(values: np.ndarray | torch.Tensor, low: float, high: float) -> np.nd
     return np.round(colours).astype(np.uint8)
 
 
-def _fit(image: Image.Image, max_side: int, resample: Image.Resampling = Image.Resampling.LANCZOS) -> Image.Image:
+def fit_image(image: Image.Image, max_side: int, resample: Image.Resampling = Image.Resampling.LANCZOS) -> Image.Image:
     """Downscale ``image`` so its long side is at most ``max_side``."""
     long_side = max(image.size)
     if long_side <= max_side:
@@ -92,7 +92,7 @@ def _data_uri(image: Image.Image) -> str:
     return "data:image/png;base64," + base64.b64encode(buffer.getvalue()).decode("ascii")
 
 
-def _image_tag(image: Image.Image, alt: str, css_class: str = "") -> str:
+def image_tag(image: Image.Image, alt: str, css_class: str = "") -> str:
     cls = f' class="{css_class}"' if css_class else ""
     return f'<img{cls} src="{_data_uri(image)}" width="{image.width}" height="{image.height}" alt="{html.escape(alt)}">'
 
@@ -112,12 +112,12 @@ def _num(value: float) -> str:
 def _images_section(content: torch.Tensor, target: torch.Tensor, result: torch.Tensor) -> str:
     figures = []
     for label, tensor in (("content", content), ("target", target), ("result", result)):
-        image = _fit(Image.fromarray(tensor_to_image(tensor)), PAGE_MAX_SIDE)
-        figures.append(f"<figure>{_image_tag(image, label)}<figcaption>{label}</figcaption></figure>")
+        image = fit_image(Image.fromarray(tensor_to_image(tensor)), PAGE_MAX_SIDE)
+        figures.append(f"<figure>{image_tag(image, label)}<figcaption>{label}</figcaption></figure>")
     return '<section><h2>Images</h2><div class="row">' + "".join(figures) + "</div></section>"
 
 
-def _metrics_section(metrics: Mapping[str, Metric]) -> str:
+def metrics_section(metrics: Mapping[str, Metric]) -> str:
     if not metrics:
         return "<section><h2>Metrics</h2><p>No metrics.</p></section>"
     rows = "".join(
@@ -199,7 +199,7 @@ def _local_params_section(real: np.ndarray, specs: Sequence[ParamSpec]) -> str:
         cards.append(
             '<div class="card">'
             f"<h3>{name}</h3>"
-            f"{_image_tag(image, spec.name, 'mask')}"
+            f"{image_tag(image, spec.name, 'mask')}"
             f"{_colour_bar(spec.min, spec.max)}"
             f'<p class="range">range [{html.escape(_num(spec.min))}, {html.escape(_num(spec.max))}]</p>'
             f'<p class="stats">min {html.escape(_num(float(mask.min())))} · '
@@ -224,7 +224,7 @@ def _params_section(params: torch.Tensor, specs: Sequence[ParamSpec]) -> str:
     return _local_params_section(real, specs)
 
 
-_STYLE = """
+STYLE = """
 body { font-family: system-ui, sans-serif; margin: 24px; color: #222; }
 .row { display: flex; flex-wrap: wrap; gap: 16px; align-items: flex-start; }
 figure { margin: 0; text-align: center; }
@@ -256,14 +256,14 @@ def render_report(
         [
             f"<h1>{title}</h1>",
             _images_section(content, target, result),
-            _metrics_section(metrics),
+            metrics_section(metrics),
             f"<section><h2>Loss</h2>{loss_svg(losses)}</section>",
             _params_section(params, specs),
         ]
     )
     return (
         '<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
-        f"<title>{title}</title><style>{_STYLE}</style></head>"
+        f"<title>{title}</title><style>{STYLE}</style></head>"
         f"<body>{body}</body></html>\n"
     )
 
@@ -307,7 +307,7 @@ def write_animation(path: PathLike, frames: Sequence[np.ndarray], duration_ms: i
             raise ValueError(f"frame {i} must be a non-empty H x W x 3 uint8 array, got {array.dtype} {array.shape}")
         image = Image.fromarray(array)
         if size is None:
-            image = _fit(image, ANIMATION_MAX_SIDE)
+            image = fit_image(image, ANIMATION_MAX_SIDE)
             size = image.size
         elif image.size != size:
             image = image.resize(size, Image.Resampling.LANCZOS)

@@ -4,6 +4,13 @@ Any folder of photos serves (searched recursively). Each example is a random cro
 photo at a random scale, flipped at random, with normalized global parameters drawn uniformly
 over [-0.5, 0.5] (or around a random preset), and the example the effect renders from them
 without autograd. A validation split keeps whole photos apart from training.
+
+The effect renders at ``render_size`` (the resolution the network's predictions are used at,
+512 pixels by default in ``wise train``) and photo and example are then reduced to the
+network's ``size``: an effect rendered small is not the same picture as a large rendering
+reduced (lines thin out, textures average), and the network sees the latter when it predicts.
+Rendering dominates the cost of training, so each example is rendered once and kept (8-bit)
+for later epochs.
 """
 
 from __future__ import annotations
@@ -18,6 +25,7 @@ from torch.utils.data import Dataset
 from wise import effects
 from wise.errors import WiseError
 from wise.io import read_image
+from wise.optimize.benchmark import MAX_DRAWS, MIN_REFERENCE_CONTRAST
 
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".webp", ".tif", ".tiff"}
 MIN_PHOTOS = 4
@@ -37,8 +45,17 @@ def photo_files(folder: str | Path) -> list[Path]:
     return sorted(p for p in root.rglob("*") if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file())
 
 
-def read_photos(files: list[Path], min_side: int) -> tuple[list[torch.Tensor], list[Path]]:
-    """The readable photos with a short side of at least ``min_side``, and the files skipped."""
+def _as_bytes(image: torch.Tensor) -> torch.Tensor:
+    return (image.clamp(0.0, 1.0) * 255.0).round().to(torch.uint8)
+
+
+def _as_floats(image: torch.Tensor) -> torch.Tensor:
+    return image.to(torch.float32) / 255.0
+
+
+def read_photos(files: list[Path], min_side: int, max_side: int | None = None) -> tuple[list[torch.Tensor], list[Path]]:
+    """The readable photos (8-bit ``(1, 3, H, W)``) with a short side of at least ``min_side``,
+    reduced to a short side of ``max_side`` when larger, and the files skipped."""
     photos, skipped = [], []
     for path in files:
         try:
@@ -46,17 +63,24 @@ def read_photos(files: list[Path], min_side: int) -> tuple[list[torch.Tensor], l
         except WiseError:
             skipped.append(path)
             continue
-        if min(photo.shape[-2:]) < min_side:
+        short = min(photo.shape[-2:])
+        if short < min_side:
             skipped.append(path)
             continue
-        photos.append(photo)
+        if max_side is not None and short > max_side:
+            factor = max_side / short
+            shape = (max(1, round(photo.shape[-2] * factor)), max(1, round(photo.shape[-1] * factor)))
+            photo = F.interpolate(photo, size=shape, mode="area")
+        photos.append(_as_bytes(photo))
     return photos, skipped
 
 
-def checked_photos(folder: str | Path, files: list[Path], min_side: int) -> tuple[list[torch.Tensor], str | None]:
+def checked_photos(
+    folder: str | Path, files: list[Path], min_side: int, max_side: int | None = None
+) -> tuple[list[torch.Tensor], str | None]:
     """The readable photos of ``files`` and one note on those skipped (None when none were);
     refuses fewer than :data:`MIN_PHOTOS`."""
-    photos, skipped = read_photos(files, min_side)
+    photos, skipped = read_photos(files, min_side, max_side)
     if len(photos) < MIN_PHOTOS:
         raise WiseError(
             f"{folder}: {len(photos)} readable photos of at least {min_side} pixels a side "
@@ -77,11 +101,14 @@ def split_files(files: list[Path], validation: float, seed: int) -> tuple[list[P
 
 
 class ExampleDataset(Dataset):
-    """``length`` examples of ``effect`` on ``size`` x ``size`` crops of ``photos``.
+    """``length`` examples of ``effect`` on square crops of ``photos``, rendered at
+    ``render_size`` (``size`` when None) and reduced to ``size``.
 
     Item ``i`` is the same every time it is asked for (drawn from a generator seeded with
-    ``seed`` and ``i``), so runs are reproducible and validation sets fixed. Returns dicts of
-    ``photo`` and ``example`` ``(3, size, size)`` and ``params`` ``(P,)``.
+    ``seed`` and ``i``), so runs are reproducible and validation sets fixed; it is rendered on
+    first use and kept. Parameters whose example is nearly blank are drawn again, as in the
+    benchmarks. Returns dicts of ``photo`` and ``example`` ``(3, size, size)`` in [0, 1] and
+    ``params`` ``(P,)``.
     """
 
     def __init__(
@@ -92,14 +119,17 @@ class ExampleDataset(Dataset):
         length: int,
         sampling: str = "uniform",
         seed: int = 0,
+        render_size: int | None = None,
     ) -> None:
         if sampling not in SAMPLINGS:
             raise WiseError(f"unknown sampling {sampling!r}; use one of {', '.join(SAMPLINGS)}")
         if not photos:
             raise WiseError("no photos to make examples from")
         self.photos, self.effect_name, self.size, self.length = photos, effect, size, length
+        self.render_size = render_size or size
         self.sampling, self.seed = sampling, seed
         self._effect = effects.create(effect).eval()
+        self._kept: dict[int, tuple[torch.Tensor, torch.Tensor, torch.Tensor]] = {}
 
     def __len__(self) -> int:
         return self.length
@@ -110,8 +140,9 @@ class ExampleDataset(Dataset):
         side = max(8, round(min(photo.shape[-2:]) * fraction))
         top = int(torch.randint(0, photo.shape[-2] - side + 1, (), generator=generator))
         left = int(torch.randint(0, photo.shape[-1] - side + 1, (), generator=generator))
-        crop = photo[..., top : top + side, left : left + side]
-        crop = F.interpolate(crop, size=(self.size, self.size), mode="area" if side > self.size else "bilinear")
+        crop = _as_floats(photo[..., top : top + side, left : left + side])
+        size = self.render_size
+        crop = F.interpolate(crop, size=(size, size), mode="area" if side > size else "bilinear")
         if float(torch.rand((), generator=generator)) < 0.5:
             crop = crop.flip(-1)
         return crop.clamp(0.0, 1.0)
@@ -124,13 +155,27 @@ class ExampleDataset(Dataset):
         preset = self._effect.preset(names[int(torch.randint(0, len(names), (), generator=generator))])
         return (preset + PRESET_SPREAD * torch.randn(count, generator=generator)).clamp(-0.5, 0.5)
 
-    def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
-        if not 0 <= index < self.length:
-            raise IndexError(index)
+    def _reduced(self, image: torch.Tensor) -> torch.Tensor:
+        if image.shape[-1] == self.size:
+            return image
+        return F.interpolate(image, size=(self.size, self.size), mode="area")
+
+    def _make(self, index: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         generator = torch.Generator().manual_seed(self.seed * 1_000_003 + index)
         photo = self.photos[int(torch.randint(0, len(self.photos), (), generator=generator))]
         crop = self._crop(photo, generator)
-        params = self._params(generator)
-        with torch.no_grad():
-            example = self._effect(crop, params[None])
-        return {"photo": crop[0], "example": example[0].clamp(0.0, 1.0), "params": params}
+        for _ in range(MAX_DRAWS):
+            params = self._params(generator)
+            with torch.no_grad():
+                example = self._effect(crop, params[None]).clamp(0.0, 1.0)
+            if float(example.std()) >= MIN_REFERENCE_CONTRAST:
+                break
+        return _as_bytes(self._reduced(crop))[0], _as_bytes(self._reduced(example))[0], params
+
+    def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
+        if not 0 <= index < self.length:
+            raise IndexError(index)
+        if index not in self._kept:
+            self._kept[index] = self._make(index)
+        photo, example, params = self._kept[index]
+        return {"photo": _as_floats(photo), "example": _as_floats(example), "params": params}

@@ -1,0 +1,1 @@
+"""The built-in global parameter prediction models, one safetensors file per effect."""

@@ -1,0 +1,81 @@
+"""Lightning modules of global parameter prediction: the network with its loss, and the data."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import lightning as L
+import torch
+from torch.utils.data import DataLoader
+
+from wise import effects, ppn
+from wise.train.data import ExampleDataset
+from wise.train.losses import prediction_loss
+from wise.train.sampler import GlobalBatchSampler
+
+
+class GlobalPPN(L.LightningModule):
+    """A global parameter prediction network trained with one of the losses of
+    :data:`wise.train.losses.LOSSES`.
+
+    Image-space losses compare the effect rendered with the predicted parameters against the
+    effect rendered with the true ones, both from the photo at the network's size, so the true
+    parameters have zero loss. The effect always runs in float32 (outside mixed precision).
+    """
+
+    def __init__(self, effect: str, architecture: str, loss: str, lr: float) -> None:
+        super().__init__()
+        self.save_hyperparameters()
+        self.effect = effects.create(effect).requires_grad_(False)
+        self.network = ppn.create(architecture, len(self.effect.param_specs))
+        self.loss_kind, self.lr = loss, lr
+
+    def forward(self, photo: torch.Tensor, example: torch.Tensor) -> torch.Tensor:
+        return self.network(photo, example)
+
+    def _losses(self, batch: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
+        photo, example, truth = batch["photo"], batch["example"], batch["params"]
+        predicted = self.network(photo, example).float()
+        with torch.autocast(self.device.type, enabled=False):
+            if self.loss_kind.startswith("image"):
+                with torch.no_grad():
+                    rendered_truth = self.effect(photo, truth).clamp(0.0, 1.0)
+                loss = prediction_loss(self.loss_kind, predicted, truth, self.effect, photo, rendered_truth)
+            else:
+                loss = prediction_loss(self.loss_kind, predicted, truth)
+        return loss, (predicted.detach() - truth).abs().mean()
+
+    def training_step(self, batch: dict[str, torch.Tensor], batch_index: int) -> torch.Tensor:
+        loss, param_l1 = self._losses(batch)
+        self.log("train_loss", loss, prog_bar=True, on_step=True, on_epoch=False)
+        self.log("train_param_l1", param_l1, on_step=True, on_epoch=False)
+        return loss
+
+    def validation_step(self, batch: dict[str, torch.Tensor], batch_index: int) -> None:
+        loss, param_l1 = self._losses(batch)
+        self.log("val_loss", loss, prog_bar=True, sync_dist=True)
+        self.log("val_param_l1", param_l1, sync_dist=True)
+
+    def configure_optimizers(self) -> Any:
+        return torch.optim.Adam(self.network.parameters(), lr=self.lr)
+
+
+class ExampleData(L.LightningDataModule):
+    """Training and validation examples; each process takes its share of every global batch
+    (:class:`GlobalBatchSampler`), so results do not depend on the number of processes."""
+
+    def __init__(self, train: ExampleDataset, validation: ExampleDataset, batch: int, seed: int) -> None:
+        super().__init__()
+        self.train_set, self.validation_set, self.batch, self.seed = train, validation, batch, seed
+
+    def _loader(self, dataset: ExampleDataset, seed: int) -> DataLoader:
+        world = self.trainer.world_size if self.trainer is not None else 1
+        rank = self.trainer.global_rank if self.trainer is not None else 0
+        batches = min(self.batch, len(dataset) // world)
+        return DataLoader(dataset, batch_sampler=GlobalBatchSampler(len(dataset), batches, world, rank, seed))
+
+    def train_dataloader(self) -> DataLoader:
+        return self._loader(self.train_set, self.seed)
+
+    def val_dataloader(self) -> DataLoader:
+        return self._loader(self.validation_set, self.seed + 1)
