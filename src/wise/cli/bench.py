@@ -9,7 +9,7 @@ from wise import effects
 from wise.cli import args as types
 from wise.cli.outputs import output_file
 from wise.cli.parser import add_device, add_pixel_limit, add_size, command, device, exit_code
-from wise.optimize.benchmark import photos_in, recover
+from wise.optimize.benchmark import INIT_PPN, parse_init, photos_in, recover
 from wise.ppn.modelfile import resolve_model
 
 IMAGE_LOSSES = ("l1", "l2")
@@ -18,8 +18,12 @@ IMAGE_LOSSES = ("l1", "l2")
 
 def run_recover(args: argparse.Namespace, out: TextIO) -> int:
     effects.create(args.effect)
+    init_kind, model = parse_init(args.init)
+    if init_kind == INIT_PPN:
+        resolve_model(model, args.effect)
     photos = photos_in(args.images)
-    output_file(args.json, {f"photo {path.name}": path for path in photos}, (".json",))
+    inputs = {f"photo {path.name}": path for path in photos}
+    output_file(args.json, {**inputs, "--init": model}, (".json",))
     result = recover(
         args.effect,
         args.images,
@@ -31,6 +35,7 @@ def run_recover(args: argparse.Namespace, out: TextIO) -> int:
         loss=args.loss,
         json_path=args.json,
         out=out,
+        init=args.init,
     )
     return exit_code(result["interrupted"])
 
@@ -68,6 +73,12 @@ def register(commands: argparse._SubParsersAction) -> None:
     )
     recover_parser.add_argument("--loss", choices=IMAGE_LOSSES, default="l2", help="image loss (default l2)")
     recover_parser.add_argument("--json", required=True, metavar="OUT", help="write the results here (.json)")
+    recover_parser.add_argument(
+        "--init",
+        default="defaults",
+        metavar="defaults|ppn[:MODEL]",
+        help="start from the defaults, or from the parameters a model predicts (default: defaults)",
+    )
     add_pixel_limit(recover_parser)
     recover_parser.set_defaults(func=run_recover)
 

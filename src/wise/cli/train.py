@@ -19,6 +19,7 @@ from wise.cli.parser import add_pixel_limit, command, exit_code
 from wise.errors import WiseError
 from wise.ppn import ARCHITECTURES
 from wise.train.losses import LOSSES
+from wise.train.settings import TrainSettings, prepare
 
 ACCELERATORS = ("auto", "cpu", "gpu", "cuda", "mps")
 RUN_FILES = ("model.safetensors", "report.html", "settings.json")
@@ -43,8 +44,6 @@ def run_train_global(args: argparse.Namespace, out: TextIO) -> int:
             "--backbone-weights: the 'simple' architecture has no ImageNet backbone; use resnet or multifeature"
         )
     run_folder = OutputFolder(args.output, RUN_FILES, {"--backbone-weights": args.backbone_weights})
-    from wise.train.run import TrainSettings, check_run_folder, train_global
-
     settings = TrainSettings(
         effect=args.effect,
         images=args.images,
@@ -52,6 +51,7 @@ def run_train_global(args: argparse.Namespace, out: TextIO) -> int:
         loss=args.loss,
         size=args.size,
         render_size=args.render_size,
+        window=args.window if args.window is not None else max(8, args.size // 2),
         batch=args.batch,
         steps=None if args.epochs is not None else (args.steps or DEFAULT_STEPS),
         epochs=args.epochs,
@@ -67,12 +67,13 @@ def run_train_global(args: argparse.Namespace, out: TextIO) -> int:
         checkpoint_every=args.checkpoint_every,
         backbone_weights=args.backbone_weights,
     )
-    settings.check()
-    check_run_folder(Path(args.output), args.resume)
+    photos = prepare(settings, Path(args.output), args.resume)
+    from wise.train.run import train_global  # Lightning
+
     for name in ("lightning.pytorch", "lightning.fabric"):
         logging.getLogger(name).setLevel(logging.WARNING)
     with run_folder.guard():
-        summary = train_global(settings, args.output, resume=args.resume, out=out)
+        summary = train_global(settings, args.output, resume=args.resume, out=out, photos=photos)
     return exit_code(summary["interrupted"])
 
 
@@ -96,6 +97,12 @@ def register(commands: argparse._SubParsersAction) -> None:
         default=512,
         metavar="PX",
         help="the size examples are rendered at before they are reduced to --size (default 512)",
+    )
+    parser.add_argument(
+        "--window",
+        type=types.whole_number(8, types.MAX_WORKING_SIZE),
+        metavar="PX",
+        help="side of the training windows at --size (default half of --size; rendering costs its square)",
     )
     parser.add_argument("--batch", type=types.batch, default=16, metavar="B", help="examples per step and process (16)")
     length = parser.add_mutually_exclusive_group()

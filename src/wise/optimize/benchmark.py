@@ -1,7 +1,8 @@
 """The functional benchmark of the WISE supplement: can optimization recover random parameters?
 
 Seeded random global parameters render a reference from a photo; optimization starts from the
-effect's defaults and tries to match it: half the iterations coarse to fine on reduced copies,
+effect's defaults (or from the parameters a trained model predicts, ``init="ppn"``) and tries
+to match it: half the iterations coarse to fine on reduced copies,
 the other half on random crops at full resolution, where details too fine for a reduced copy
 (brush texture, thin lines) can be matched; SSIM and PSNR measure how close it gets.
 """
@@ -12,7 +13,7 @@ import json
 import statistics
 import sys
 from pathlib import Path
-from typing import TextIO
+from typing import Callable, TextIO
 
 import torch
 import torch.nn.functional as F
@@ -98,6 +99,20 @@ def content_at(photo: torch.Tensor, size: int) -> torch.Tensor:
     return F.interpolate(photo, size=shape, mode="area" if factor < 1 else "bilinear")
 
 
+INIT_DEFAULTS = "defaults"
+INIT_PPN = "ppn"
+
+
+def parse_init(init: str) -> tuple[str, str | None]:
+    """``defaults``, ``ppn`` (the built-in model) or ``ppn:MODEL`` -> (kind, model file or None)."""
+    kind, _, model = init.partition(":")
+    if kind == INIT_DEFAULTS and not model:
+        return kind, None
+    if kind == INIT_PPN:
+        return kind, model or None
+    raise WiseError(f"--init {init!r}: use {INIT_DEFAULTS}, {INIT_PPN} or {INIT_PPN}:MODEL")
+
+
 def _trial(
     effect: Effect,
     content: torch.Tensor,
@@ -105,10 +120,12 @@ def _trial(
     levels: tuple[tuple[int, Settings], ...],
     crops: Settings | None,
     crop_seed: int,
+    predictor: Callable[[torch.Tensor, torch.Tensor], torch.Tensor] | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor, Outcome]:
     """One trial: random parameters, their reference, and the optimization's outcome."""
     truth, reference = random_reference(effect, content, generator)
-    outcome = optimize_coarse_to_fine(effect, content, reference, effect.default_params(), levels)
+    start = effect.default_params() if predictor is None else predictor(content, reference)
+    outcome = optimize_coarse_to_fine(effect, content, reference, start, levels)
     if crops is not None and not outcome.interrupted:
         coarse_seconds = outcome.seconds
         crop_generator = torch.Generator().manual_seed(crop_seed)
@@ -128,6 +145,7 @@ def recover(
     loss: str = "l2",
     json_path: str | None = None,
     out: TextIO = sys.stdout,
+    init: str = INIT_DEFAULTS,
 ) -> dict:
     """Run the benchmark; prints a table and returns (and optionally writes) the results.
 
@@ -138,6 +156,12 @@ def recover(
     if trials < 1:
         raise WiseError(f"--trials must be at least 1, got {trials}")
     effect = effects.create(effect_name)
+    init_kind, model = parse_init(init)
+    predictor = None
+    if init_kind == INIT_PPN:
+        from wise.predict import Predictor
+
+        predictor = Predictor(model, effect_name)
     photos = photos_in(images_dir)[:trials]
     contents = {path: content_at(read_image(path), size) for path in photos}
     generator = torch.Generator().manual_seed(seed)
@@ -149,7 +173,7 @@ def recover(
             for trial in range(trials):
                 photo_path = photos[trial % len(photos)]
                 truth, reference, outcome = _trial(
-                    effect, contents[photo_path], generator, levels, crops, seed * 1_000_003 + trial
+                    effect, contents[photo_path], generator, levels, crops, seed * 1_000_003 + trial, predictor
                 )
                 if outcome.interrupted:
                     raise KeyboardInterrupt
@@ -159,6 +183,7 @@ def recover(
             print(f"interrupted: {len(rows)} of {trials} trials finished", file=out, flush=True)
         interruption.hold()
         result = _summary(effect_name, size, iterations, loss, seed, levels, crops, rows, interruption.received)
+        result["init"] = init if predictor is None else f"{INIT_PPN}:{predictor.info.source}"
         if rows:
             print(f"mean SSIM {result['mean_ssim']:.4f}, mean PSNR {result['mean_psnr']:.2f} dB", file=out)
         if json_path is not None:

@@ -9,8 +9,8 @@ The effect renders at ``render_size`` (the resolution the network's predictions 
 512 pixels by default in ``wise train``) and photo and example are then reduced to the
 network's ``size``: an effect rendered small is not the same picture as a large rendering
 reduced (lines thin out, textures average), and the network sees the latter when it predicts.
-Rendering dominates the cost of training, so each example is rendered once and kept (8-bit)
-for later epochs.
+Rendering dominates the cost of training, so training takes windows of the pictures (rendered
+as tiles) and each example is rendered once and kept (8-bit) for later epochs.
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ from torch.utils.data import Dataset
 
 from wise import effects
 from wise.errors import WiseError
+from wise.filters._checks import REFERENCE_SHORT_SIDE
 from wise.io import read_image
 from wise.optimize.benchmark import MAX_DRAWS, MIN_REFERENCE_CONTRAST
 
@@ -101,14 +102,19 @@ def split_files(files: list[Path], validation: float, seed: int) -> tuple[list[P
 
 
 class ExampleDataset(Dataset):
-    """``length`` examples of ``effect`` on square crops of ``photos``, rendered at
-    ``render_size`` (``size`` when None) and reduced to ``size``.
+    """``length`` examples of ``effect`` on square windows of ``photos``.
+
+    ``size`` is the network's input size for a whole picture (its short side) and
+    ``render_size`` the short side the effect renders the whole picture at; training sees
+    windows of ``window`` network pixels of such pictures (``size`` by default). The effect
+    renders only the window, as a tile of the whole picture (its ``scale`` and ``origin``),
+    so a window of half the size costs a quarter of the rendering.
 
     Item ``i`` is the same every time it is asked for (drawn from a generator seeded with
     ``seed`` and ``i``), so runs are reproducible and validation sets fixed; it is rendered on
     first use and kept. Parameters whose example is nearly blank are drawn again, as in the
-    benchmarks. Returns dicts of ``photo`` and ``example`` ``(3, size, size)`` in [0, 1] and
-    ``params`` ``(P,)``.
+    benchmarks. Returns dicts of ``photo`` and ``example`` ``(3, window, window)`` in [0, 1]
+    and ``params`` ``(P,)``.
     """
 
     def __init__(
@@ -120,6 +126,7 @@ class ExampleDataset(Dataset):
         sampling: str = "uniform",
         seed: int = 0,
         render_size: int | None = None,
+        window: int | None = None,
     ) -> None:
         if sampling not in SAMPLINGS:
             raise WiseError(f"unknown sampling {sampling!r}; use one of {', '.join(SAMPLINGS)}")
@@ -127,6 +134,9 @@ class ExampleDataset(Dataset):
             raise WiseError("no photos to make examples from")
         self.photos, self.effect_name, self.size, self.length = photos, effect, size, length
         self.render_size = render_size or size
+        self.window = min(window or size, size)
+        self.tile = max(8, round(self.window * self.render_size / size))
+        """The window's side in rendered pixels."""
         self.sampling, self.seed = sampling, seed
         self._effect = effects.create(effect).eval()
         self._kept: dict[int, tuple[torch.Tensor, torch.Tensor, torch.Tensor]] = {}
@@ -134,18 +144,26 @@ class ExampleDataset(Dataset):
     def __len__(self) -> int:
         return self.length
 
-    def _crop(self, photo: torch.Tensor, generator: torch.Generator) -> torch.Tensor:
+    @property
+    def render_scale(self) -> float:
+        """The effect's scale of the whole picture (pixels per reference pixel)."""
+        return self.render_size / REFERENCE_SHORT_SIDE
+
+    def _tile(self, photo: torch.Tensor, generator: torch.Generator) -> tuple[torch.Tensor, tuple[int, int]]:
+        """A random window of a random picture of ``photo`` (a square part of ``SCALE_RANGE``
+        of its short side, at ``render_size``), at ``tile`` pixels, and its origin in the picture."""
         low, high = SCALE_RANGE
         fraction = low + (high - low) * float(torch.rand((), generator=generator))
-        side = max(8, round(min(photo.shape[-2:]) * fraction))
+        zoom = self.render_size / (fraction * min(photo.shape[-2:]))
+        side = min(min(photo.shape[-2:]), max(8, round(self.tile / zoom)))
         top = int(torch.randint(0, photo.shape[-2] - side + 1, (), generator=generator))
         left = int(torch.randint(0, photo.shape[-1] - side + 1, (), generator=generator))
-        crop = _as_floats(photo[..., top : top + side, left : left + side])
-        size = self.render_size
-        crop = F.interpolate(crop, size=(size, size), mode="area" if side > size else "bilinear")
+        tile = _as_floats(photo[..., top : top + side, left : left + side])
+        size = self.tile
+        tile = F.interpolate(tile, size=(size, size), mode="area" if side > size else "bilinear")
         if float(torch.rand((), generator=generator)) < 0.5:
-            crop = crop.flip(-1)
-        return crop.clamp(0.0, 1.0)
+            tile = tile.flip(-1)
+        return tile.clamp(0.0, 1.0), (round(top * zoom), round(left * zoom))
 
     def _params(self, generator: torch.Generator) -> torch.Tensor:
         count = len(self._effect.param_specs)
@@ -155,22 +173,26 @@ class ExampleDataset(Dataset):
         preset = self._effect.preset(names[int(torch.randint(0, len(names), (), generator=generator))])
         return (preset + PRESET_SPREAD * torch.randn(count, generator=generator)).clamp(-0.5, 0.5)
 
-    def _reduced(self, image: torch.Tensor) -> torch.Tensor:
-        if image.shape[-1] == self.size:
+    def reduced(self, image: torch.Tensor) -> torch.Tensor:
+        if image.shape[-1] == self.window:
             return image
-        return F.interpolate(image, size=(self.size, self.size), mode="area")
+        return F.interpolate(image, size=(self.window, self.window), mode="area")
+
+    def render(self, tile: torch.Tensor, params: torch.Tensor, origin: tuple[int, int] = (0, 0)) -> torch.Tensor:
+        """The effect on a tile at ``tile`` pixels as part of the whole picture, without autograd."""
+        with torch.no_grad():
+            return self._effect(tile, params, scale=self.render_scale, origin=origin).clamp(0.0, 1.0)
 
     def _make(self, index: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        generator = torch.Generator().manual_seed(self.seed * 1_000_003 + index)
+        generator = torch.Generator().manual_seed((self.seed * 1_000_003 + index) % 2**63)
         photo = self.photos[int(torch.randint(0, len(self.photos), (), generator=generator))]
-        crop = self._crop(photo, generator)
+        tile, origin = self._tile(photo, generator)
         for _ in range(MAX_DRAWS):
             params = self._params(generator)
-            with torch.no_grad():
-                example = self._effect(crop, params[None]).clamp(0.0, 1.0)
+            example = self.render(tile, params[None], origin)
             if float(example.std()) >= MIN_REFERENCE_CONTRAST:
                 break
-        return _as_bytes(self._reduced(crop))[0], _as_bytes(self._reduced(example))[0], params
+        return _as_bytes(self.reduced(tile))[0], _as_bytes(self.reduced(example))[0], params
 
     def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
         if not 0 <= index < self.length:

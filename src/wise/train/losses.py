@@ -23,9 +23,11 @@ def prediction_loss(
     effect: Effect | None = None,
     photo: torch.Tensor | None = None,
     example: torch.Tensor | None = None,
+    scale: float | None = None,
 ) -> torch.Tensor:
     """``param-l1`` / ``param-l2``: predicted against true normalized parameters ``(B, P)``;
-    ``image-l1`` / ``image-l2``: ``effect(photo, predicted)`` against ``example``."""
+    ``image-l1`` / ``image-l2``: ``effect(photo, predicted)`` (at the effect's ``scale`` of the
+    whole picture, see :class:`wise.effects.base.RenderContext`) against ``example``."""
     if kind not in LOSSES:
         raise WiseError(f"unknown loss {kind!r}; use one of {', '.join(LOSSES)}")
     space, norm = kind.split("-")
@@ -33,4 +35,4 @@ def prediction_loss(
         return _distance(predicted, truth, norm)
     if effect is None or photo is None or example is None:
         raise WiseError(f"the {kind} loss needs the effect, the photos and the examples")
-    return _distance(effect(photo, predicted), example, norm)
+    return _distance(effect(photo, predicted, scale=scale), example, norm)

@@ -9,6 +9,7 @@ import torch
 from torch.utils.data import DataLoader
 
 from wise import effects, ppn
+from wise.filters._checks import REFERENCE_SHORT_SIDE
 from wise.train.data import ExampleDataset
 from wise.train.losses import prediction_loss
 from wise.train.sampler import GlobalBatchSampler
@@ -19,16 +20,18 @@ class GlobalPPN(L.LightningModule):
     :data:`wise.train.losses.LOSSES`.
 
     Image-space losses compare the effect rendered with the predicted parameters against the
-    effect rendered with the true ones, both from the photo at the network's size, so the true
-    parameters have zero loss. The effect always runs in float32 (outside mixed precision).
+    effect rendered with the true ones, both from the photo at the network's size (the whole
+    picture ``size`` pixels), so the true parameters have zero loss. The effect always runs in
+    float32 (outside mixed precision).
     """
 
-    def __init__(self, effect: str, architecture: str, loss: str, lr: float) -> None:
+    def __init__(self, effect: str, architecture: str, loss: str, lr: float, size: int) -> None:
         super().__init__()
         self.save_hyperparameters()
         self.effect = effects.create(effect).requires_grad_(False)
         self.network = ppn.create(architecture, len(self.effect.param_specs))
         self.loss_kind, self.lr = loss, lr
+        self.scale = size / REFERENCE_SHORT_SIDE
 
     def forward(self, photo: torch.Tensor, example: torch.Tensor) -> torch.Tensor:
         return self.network(photo, example)
@@ -39,8 +42,10 @@ class GlobalPPN(L.LightningModule):
         with torch.autocast(self.device.type, enabled=False):
             if self.loss_kind.startswith("image"):
                 with torch.no_grad():
-                    rendered_truth = self.effect(photo, truth).clamp(0.0, 1.0)
-                loss = prediction_loss(self.loss_kind, predicted, truth, self.effect, photo, rendered_truth)
+                    rendered_truth = self.effect(photo, truth, scale=self.scale).clamp(0.0, 1.0)
+                loss = prediction_loss(
+                    self.loss_kind, predicted, truth, self.effect, photo, rendered_truth, scale=self.scale
+                )
             else:
                 loss = prediction_loss(self.loss_kind, predicted, truth)
         return loss, (predicted.detach() - truth).abs().mean()

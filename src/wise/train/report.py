@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Mapping
 
 import torch
+import torch.nn.functional as F
 from PIL import Image
 
 from wise.io import atomic_path, tensor_to_image
@@ -46,14 +47,14 @@ def _read_curves(metrics_csv: Path, curves: dict[str, list[float]]) -> None:
 def _triples(module: GlobalPPN, validation: ExampleDataset) -> str:
     rows = []
     network = module.network.eval()
-    effect = module.effect.cpu()
     device = next(network.parameters()).device
     for index in range(min(TRIPLES, len(validation))):
         item = validation[index]
         photo, example = item["photo"][None], item["example"][None]
         with torch.no_grad():
             predicted = network(photo.to(device), example.to(device)).float().cpu()
-            rendered = effect(photo, predicted).clamp(0.0, 1.0)
+        tile = F.interpolate(photo, size=(validation.tile, validation.tile), mode="bilinear", align_corners=False)
+        rendered = validation.reduced(validation.render(tile.clamp(0.0, 1.0), predicted))
         error = float((predicted[0] - item["params"]).abs().mean())
         cells = []
         for label, image in (("photo", photo), ("example", example), ("prediction", rendered)):

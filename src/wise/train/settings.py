@@ -1,0 +1,141 @@
+"""What a training run is made of, checked before any work (no Lightning here, so that bad
+input is refused quickly): the settings, the run folder and the photos."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+
+from wise import effects, ppn
+from wise.errors import WiseError, WiseWarning
+from wise.train.data import SAMPLINGS, SCALE_RANGE, checked_photos, photo_files, read_photos, split_files
+from wise.train.losses import LOSSES
+
+CHECKPOINT = Path("checkpoints") / "last.ckpt"
+SETTINGS_FILE = "settings.json"
+MODEL_FILE = "model.safetensors"
+REPORT_FILE = "report.html"
+LOGS = "logs"
+"""Lightning's CSV logs, one numbered part per start of the run (``logs/<n>/metrics.csv``)."""
+VALIDATION_SHARE = 0.15
+"""Share of the photos held out for validation when no ``--val-images`` are given."""
+VALIDATION_EXAMPLES = 64
+RESUMABLE = ("effect", "architecture", "loss", "size", "render_size", "window", "batch", "examples", "sampling", "seed")
+"""Settings a resumed run must share with the run it continues."""
+
+
+@dataclass
+class TrainSettings:
+    """Everything a training run is made of (``settings.json`` and the model's metadata)."""
+
+    effect: str
+    images: str
+    architecture: str = "simple"
+    loss: str = "param-l1"
+    size: int = 128
+    render_size: int = 512
+    window: int | None = None
+    """Side of the training windows in network pixels (``size`` when None)."""
+    batch: int = 16
+    steps: int | None = None
+    epochs: int | None = None
+    examples: int = 2000
+    lr: float = 1e-3
+    sampling: str = "uniform"
+    val_images: str | None = None
+    accelerator: str = "auto"
+    devices: int = 1
+    num_nodes: int = 1
+    seed: int = 0
+    half: bool = False
+    checkpoint_every: int = 200
+    backbone_weights: str | None = None
+
+    def check(self) -> None:
+        effects.create(self.effect)
+        if self.architecture not in ppn.ARCHITECTURES:
+            raise WiseError(f"unknown architecture {self.architecture!r}; use one of {', '.join(ppn.ARCHITECTURES)}")
+        if self.loss not in LOSSES:
+            raise WiseError(f"unknown loss {self.loss!r}; use one of {', '.join(LOSSES)}")
+        if self.sampling not in SAMPLINGS:
+            raise WiseError(f"unknown sampling {self.sampling!r}; use one of {', '.join(SAMPLINGS)}")
+        if self.window is not None and not 8 <= self.window <= self.size:
+            raise WiseError(f"--window {self.window} must be from 8 to --size ({self.size})")
+        if self.render_size < self.size:
+            raise WiseError(f"--render-size {self.render_size} is below --size {self.size}; render at least as large")
+        if self.examples < self.batch * self.devices * self.num_nodes:
+            raise WiseError(
+                f"--examples {self.examples} is fewer than one global batch "
+                f"({self.batch} x {self.devices * self.num_nodes} processes)"
+            )
+
+
+def is_launched_rank() -> bool:
+    """Whether this process is a further rank started by the DDP launcher (not the user's)."""
+    return os.environ.get("LOCAL_RANK", "0") != "0" or os.environ.get("NODE_RANK", "0") != "0"
+
+
+def check_run_folder(folder: Path, resume: bool) -> None:
+    """A new run needs a folder without a run in it; ``--resume`` needs one."""
+    has_run = (folder / SETTINGS_FILE).exists() or (folder / CHECKPOINT).exists()
+    if resume and not (folder / CHECKPOINT).is_file():
+        raise WiseError(f"{folder}: no checkpoint to resume ({CHECKPOINT} is missing); start a run without --resume")
+    if not resume and has_run and not is_launched_rank():
+        raise WiseError(f"{folder}: holds a training run; pass --resume to continue it, or choose another folder")
+
+
+def check_resumed(folder: Path, settings: TrainSettings) -> None:
+    try:
+        before = json.loads((folder / SETTINGS_FILE).read_text())
+    except (OSError, ValueError):
+        raise WiseError(f"{folder}: {SETTINGS_FILE} is missing or unreadable; cannot resume this run") from None
+    now = dataclasses.asdict(settings)
+    changed = [key for key in RESUMABLE if before.get(key) != now.get(key)]
+    if changed:
+        listed = ", ".join(f"{key} {before.get(key)!r} -> {now.get(key)!r}" for key in changed)
+        raise WiseError(f"{folder}: --resume with other settings than the run ({listed}); repeat its settings")
+
+
+def load_photos(settings: TrainSettings) -> tuple[list[torch.Tensor], list[torch.Tensor], list[str]]:
+    """Training and validation photos (disjoint), and notes on skipped files."""
+    files = photo_files(settings.images)
+    if settings.val_images is not None:
+        validation_files = photo_files(settings.val_images)
+        shared = {p.resolve() for p in files} & {p.resolve() for p in validation_files}
+        if shared:
+            raise WiseError(
+                f"{settings.val_images}: {len(shared)} validation photos are also training photos "
+                f"(e.g. {sorted(shared)[0].name}); keep the folders apart"
+            )
+        training_files = files
+    else:
+        training_files, validation_files = split_files(files, VALIDATION_SHARE, settings.seed)
+    largest = math.ceil(settings.render_size / SCALE_RANGE[0])
+    training, note = checked_photos(settings.images, training_files, settings.size, largest)
+    validation, skipped = read_photos(validation_files, settings.size, largest)
+    if not validation:
+        where = settings.val_images or settings.images
+        raise WiseError(f"{where}: no readable validation photos of at least {settings.size} pixels a side")
+    notes = [note] if note else []
+    if skipped and settings.val_images is not None:
+        notes.append(f"{settings.val_images}: skipped {len(skipped)} unreadable or too small files")
+    return training, validation, notes
+
+
+def prepare(settings: TrainSettings, folder: Path, resume: bool) -> tuple[list[torch.Tensor], list[torch.Tensor]]:
+    """Check the settings and the run folder and read the photos (training, validation)."""
+    settings.check()
+    check_run_folder(folder, resume)
+    if resume:
+        check_resumed(folder, settings)
+    training, validation, notes = load_photos(settings)
+    for note in notes:
+        warnings.warn(note, WiseWarning, stacklevel=2)
+    return training, validation

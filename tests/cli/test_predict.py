@@ -1,0 +1,117 @@
+"""``wise predict``, ``wise bench ppn`` and ``wise bench recover --init ppn``."""
+
+from __future__ import annotations
+
+import io
+import json
+from contextlib import redirect_stdout
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from PIL import Image
+from skimage import data
+
+import wise
+from wise import ppn
+from wise.cli import main
+from wise.io import read_image
+from wise.optimize.benchmark import content_at, random_reference
+from wise.ppn.modelfile import ModelInfo, save_model
+from wise.predict import Predictor
+
+
+def _run(argv: list[str]) -> tuple[int, str]:
+    out = io.StringIO()
+    with redirect_stdout(out):
+        code = main(argv)
+    return code, out.getvalue()
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    root = tmp_path_factory.mktemp("predict")
+    photo = Image.fromarray(data.astronaut()).resize((160, 120))
+    photo.save(root / "photo.png")
+    effect = wise.effects.create("cartoon")
+    with torch.no_grad():
+        example = effect(torch.from_numpy(np.array(photo)).permute(2, 0, 1)[None] / 255.0, effect.preset("bold"))
+    Image.fromarray((example[0].permute(1, 2, 0).numpy() * 255).round().astype(np.uint8)).save(root / "example.png")
+    Image.open(root / "example.png").resize((320, 240)).save(root / "example-large.png")
+    (root / "photos").mkdir()
+    for name in ("coffee", "chelsea"):
+        Image.fromarray(getattr(data, name)()).resize((96, 72)).save(root / "photos" / f"{name}.png")
+    torch.manual_seed(0)
+    network = ppn.create("simple", len(effect.param_specs))
+    info = ModelInfo("cartoon", "simple", effect.param_names, size=48, render_size=64)
+    save_model(root / "cartoon-model.safetensors", network, info)
+    return {"root": root}
+
+
+def test_predict_writes_parameters_that_apply_renders_to_the_same_pixels(files: dict[str, Path]) -> None:
+    root = files["root"]
+    code, printed = _run(
+        ["predict", "cartoon", "--content", str(root / "photo.png"), "--target", str(root / "example-large.png"),
+         "-o", str(root / "out"), "--model", str(root / "cartoon-model.safetensors")]
+    )  # fmt: skip
+    assert code == 0 and "resizing the target from 320x240 to 160x120" in printed
+    scores = json.loads((root / "out" / "metrics.json").read_text())
+    assert {"ssim", "psnr", "l1", "seconds", "model"} <= scores.keys() and scores["seconds"] < 1.0
+    assert 0.0 < scores["ssim"] <= 1.0 and scores["model"].endswith("cartoon-model.safetensors")
+    code, _ = _run(
+        ["apply", "cartoon", str(root / "photo.png"), "-o", str(root / "applied.png"),
+         "--params", str(root / "out" / "params.safetensors")]
+    )  # fmt: skip
+    assert code == 0
+    result = np.asarray(Image.open(root / "out" / "result.png"))
+    assert result.shape == (120, 160, 3)
+    assert np.array_equal(result, np.asarray(Image.open(root / "applied.png")))
+
+
+def test_predict_refines_from_the_prediction(files: dict[str, Path]) -> None:
+    root = files["root"]
+    code, _ = _run(
+        ["predict", "cartoon", "--content", str(root / "photo.png"), "--target", str(root / "example.png"),
+         "-o", str(root / "refined"), "--model", str(root / "cartoon-model.safetensors"), "--refine", "6"]
+    )  # fmt: skip
+    assert code == 0
+    scores = json.loads((root / "refined" / "metrics.json").read_text())
+    assert scores["iterations"] == 6 and scores["prediction"]["ssim"] > 0 and scores["seconds"] < 1.0
+    for name in ("params.safetensors", "result.png", "report.html", "predicted.safetensors"):
+        assert (root / "refined" / name).is_file()
+
+
+def test_bench_ppn_reports_means_and_trials(files: dict[str, Path]) -> None:
+    root = files["root"]
+    code, printed = _run(
+        ["bench", "ppn", "cartoon", "--images", str(root / "photos"), "--model", str(root / "cartoon-model.safetensors"),
+         "--trials", "3", "--size", "64", "--json", str(root / "ppn.json")]
+    )  # fmt: skip
+    assert code == 0 and "mean SSIM" in printed
+    result = json.loads((root / "ppn.json").read_text())
+    assert result["trials_finished"] == 3 and [row["image"] for row in result["trials"]][:2] == [
+        "chelsea.png",
+        "coffee.png",
+    ]
+    for key in ("mean_ssim", "mean_psnr", "mean_param_l1", "seconds_per_prediction"):
+        assert isinstance(result[key], float)
+    assert result["mean_param_l1"] == pytest.approx(np.mean([row["param_l1"] for row in result["trials"]]))
+
+
+def test_recover_starts_from_the_prediction(files: dict[str, Path]) -> None:
+    root = files["root"]
+    model = root / "cartoon-model.safetensors"
+    code, _ = _run(
+        ["bench", "recover", "cartoon", "--images", str(root / "photos"), "--trials", "1", "--size", "32",
+         "--iters", "2", "--lr", "1e-9", "--init", f"ppn:{model}", "--json", str(root / "recover.json")]
+    )  # fmt: skip
+    assert code == 0
+    result = json.loads((root / "recover.json").read_text())
+    assert result["init"] == f"ppn:{model}" and result["trials_finished"] == 1
+    effect = wise.effects.create("cartoon")
+    content = content_at(read_image(root / "photos" / "chelsea.png"), 32)
+    _, reference = random_reference(effect, content, torch.Generator().manual_seed(0))
+    predicted = effect.params_to_dict(Predictor(str(model), "cartoon")(content, reference)[0])
+    assert result["trials"][0]["found_params"] == pytest.approx(predicted, rel=1e-4, abs=1e-4)
+    assert predicted != pytest.approx(effect.params_to_dict(effect.default_params()), rel=1e-3, abs=1e-3)
