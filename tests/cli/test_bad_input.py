@@ -29,8 +29,10 @@ from safetensors.torch import save_file
 from skimage import data
 
 import wise
+from wise import ppn
 from wise.cli import main
 from wise.paramfile import save_params
+from wise.ppn.modelfile import ModelInfo, save_model
 
 SRC = Path(wise.__file__).resolve().parent.parent
 IN_PROCESS_LIMIT = 1.0
@@ -97,8 +99,25 @@ def world(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     (root / "bad-photos" / "broken.png").write_text("not an image")
     (root / "read-only").mkdir()
     (root / "read-only").chmod(stat.S_IRUSR | stat.S_IXUSR)
+    _models(root, photo)
     main(["effects"])  # imports done before the clock runs
     return {"root": root}
+
+
+def _models(root: Path, photo: Image.Image) -> None:
+    """Model files, training photos and a finished training run."""
+    for effect in ("xdog", "cartoon"):
+        count = len(wise.effects.create(effect).param_specs)
+        info = ModelInfo(effect, "simple", wise.effects.create(effect).param_names, size=64, render_size=128)
+        save_model(root / f"{effect}-model.safetensors", ppn.create("simple", count), info)
+    whole = (root / "xdog-model.safetensors").read_bytes()
+    (root / "cut-model.safetensors").write_bytes(whole[: len(whole) // 2])
+    (root / "model.pth").write_bytes(b"\x80\x04not loaded")
+    (root / "photos4").mkdir()
+    for index in range(4):
+        photo.resize((200 + 8 * index, 150)).save(root / "photos4" / f"photo{index}.png")
+    (root / "old-run").mkdir()
+    (root / "old-run" / "settings.json").write_text("{}")
 
 
 def _with_nan(source: Path, good: torch.Tensor, bad: torch.Tensor) -> bytes:
@@ -142,8 +161,72 @@ TRANSFER = "transfer watercolor --content {root}/photo.png --builtin-style 0 -o 
 GATYS = "transfer watercolor --content {root}/photo.png --style {root}/target.png --nst gatys -o {root}/run"
 RECOVER = "bench recover xdog --images {root}/photos --json {root}/bench.json"
 EDIT = "edit {root}/photo.png --port 8931"
+PREDICT = (
+    "predict xdog --content {root}/photo.png --target {root}/target.png -o {root}/pred "
+    "--model {root}/xdog-model.safetensors"
+)
+PREDICT_WITH = "predict xdog --content {root}/photo.png --target {root}/target.png -o {root}/pred --model"
+TRAIN = "train global xdog --images {root}/photos4 -o {root}/train-run"
+PPN = "bench ppn xdog --images {root}/photos --json {root}/ppn.json --model"
 
 CASES: dict[str, Case] = {
+    # predict
+    "predict: unknown effect": Case(PREDICT.replace("xdog", "oil", 1), "unknown effect 'oil'"),
+    "predict: model of another effect": Case(
+        PREDICT_WITH + " {root}/cartoon-model.safetensors", "a model for 'cartoon', not 'xdog'"
+    ),
+    "predict: corrupt model": Case(PREDICT_WITH + " {root}/cut-model.safetensors", "not a safetensors file"),
+    "predict: parameter file as model": Case(PREDICT_WITH + " {root}/xdog.safetensors", "not a wise model file"),
+    "predict: text as model": Case(PREDICT_WITH + " {root}/notes.safetensors", "not a safetensors file"),
+    "predict: pickled model": Case(PREDICT_WITH + " {root}/model.pth", "must be a .safetensors file"),
+    "predict: missing model": Case(PREDICT_WITH + " {root}/nope.safetensors", "no such file"),
+    "predict: FIFO as model": Case(PREDICT_WITH + " {root}/fifo.safetensors", "not a regular file", process=True),
+    "predict: target of another aspect ratio": Case(
+        PREDICT.replace("target.png", "square.png"), "another aspect ratio"
+    ),
+    "predict: text as content": Case(PREDICT.replace("photo.png", "notes.png"), "not an image"),
+    "predict: output is a file": Case(PREDICT.replace("{root}/pred", "{root}/a-file"), "not a directory"),
+    "predict: negative --refine": Case(PREDICT + " --refine -1", "--refine: must be from 0"),
+    "predict: unknown --mode": Case(PREDICT + " --refine 5 --mode painted", "invalid choice"),
+    # train global
+    "train: unknown effect": Case(TRAIN.replace("xdog", "oil", 1), "unknown effect 'oil'"),
+    "train: unknown architecture": Case(TRAIN + " --arch vgg", "invalid choice: 'vgg'"),
+    "train: unknown loss": Case(TRAIN + " --loss perceptual", "invalid choice: 'perceptual'"),
+    "train: empty photo folder": Case(TRAIN.replace("photos4", "no-photos"), "0 readable photos"),
+    "train: unreadable photos": Case(TRAIN.replace("photos4", "bad-photos"), "(1 skipped); training needs at least 4"),
+    "train: missing photo folder": Case(TRAIN.replace("photos4", "nope"), "not a directory of photos"),
+    "train: photo folder is a file": Case(TRAIN.replace("photos4", "a-file"), "not a directory of photos"),
+    "train: validation photos are training photos": Case(
+        TRAIN + " --val-images {root}/photos4", "also training photos"
+    ),
+    "train: resume without a run": Case(TRAIN + " --resume", "no checkpoint to resume"),
+    "train: folder holds a run": Case(TRAIN.replace("train-run", "old-run"), "pass --resume"),
+    "train: run folder is a file": Case(TRAIN.replace("train-run", "a-file"), "not a directory"),
+    "train: --batch 0": Case(TRAIN + " --batch 0", "--batch: must be from 1"),
+    "train: --steps and --epochs": Case(TRAIN + " --steps 5 --epochs 5", "not allowed with"),
+    "train: --lr nan": Case(TRAIN + " --lr nan", "--lr: 'nan' is not a finite number"),
+    "train: huge seed": Case(TRAIN + " --seed 4294967296", "--seed: must be from 0 to 4,294,967,295"),
+    "train: gpu without CUDA": Case(TRAIN + " --accelerator gpu", "CUDA is not available"),
+    "train: --devices 0": Case(TRAIN + " --devices 0", "--devices: must be from 1"),
+    "train: render size below size": Case(TRAIN + " --size 256 --render-size 128", "below --size 256"),
+    "train: window above size": Case(TRAIN + " --size 64 --window 100", "--window 100 must be from 8"),
+    "train: too few examples": Case(TRAIN + " --examples 4 --batch 8", "fewer than one global batch"),
+    "train: backbone for simple": Case(TRAIN + " --backbone-weights {root}/xdog.safetensors", "no ImageNet backbone"),
+    # bench ppn and recover --init ppn
+    "bench ppn: model of another effect": Case(PPN + " {root}/cartoon-model.safetensors", "a model for 'cartoon'"),
+    "bench ppn: corrupt model": Case(PPN + " {root}/cut-model.safetensors", "not a safetensors file"),
+    "bench ppn: --trials 0": Case(PPN + " {root}/xdog-model.safetensors --trials 0", "--trials: must be from 1"),
+    "bench ppn: json is a folder": Case(
+        PPN.replace("ppn.json", "results.json") + " {root}/xdog-model.safetensors", "is a directory"
+    ),
+    "bench recover: unknown --init": Case(
+        "bench recover xdog --images {root}/photos --json {root}/bench.json --init magic", "--init 'magic'"
+    ),
+    "bench recover: --init model of another effect": Case(
+        "bench recover xdog --images {root}/photos --json {root}/bench.json "
+        "--init ppn:{root}/cartoon-model.safetensors",
+        "a model for 'cartoon'",
+    ),
     # the command itself
     "no command": Case("", "required"),
     "unknown command": Case("frobnicate", "invalid choice"),
@@ -352,7 +435,7 @@ def _check(code: int, out: str, err: str, case: Case, seconds: float, limit: flo
 def test_catalogue_is_large() -> None:
     assert len(CASES) >= 60
     commands = {case.argv.split()[0] for case in CASES.values() if case.argv}
-    assert {"effects", "apply", "gallery", "optimize", "transfer", "bench", "edit"} <= commands
+    assert {"effects", "apply", "gallery", "optimize", "transfer", "bench", "edit", "predict", "train"} <= commands
 
 
 @pytest.mark.parametrize("name", sorted(CASES))

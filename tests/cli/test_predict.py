@@ -85,8 +85,9 @@ def test_predict_refines_from_the_prediction(files: dict[str, Path]) -> None:
 def test_bench_ppn_reports_means_and_trials(files: dict[str, Path]) -> None:
     root = files["root"]
     code, printed = _run(
-        ["bench", "ppn", "cartoon", "--images", str(root / "photos"), "--model", str(root / "cartoon-model.safetensors"),
-         "--trials", "3", "--size", "64", "--json", str(root / "ppn.json")]
+        ["bench", "ppn", "cartoon", "--images", str(root / "photos"),
+         "--model", str(root / "cartoon-model.safetensors"), "--trials", "3", "--size", "64",
+         "--json", str(root / "ppn.json")]
     )  # fmt: skip
     assert code == 0 and "mean SSIM" in printed
     result = json.loads((root / "ppn.json").read_text())

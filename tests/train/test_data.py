@@ -71,7 +71,7 @@ def test_windows_are_tiles_of_a_larger_rendering_reduced(folder: Path) -> None:
     generator = torch.Generator().manual_seed(1 * 1_000_003 + 0)
     photo = photos[int(torch.randint(0, len(photos), (), generator=generator))]
     tile, origin = dataset._tile(photo, generator)
-    params = dataset._params(generator)
+    params = dataset._params(generator)  # the first draw: its example is not blank
     assert tile.shape[-2:] == (48, 48) and torch.equal(params, item["params"])
     effect = wise.effects.create("xdog")
     with torch.no_grad():
@@ -79,6 +79,22 @@ def test_windows_are_tiles_of_a_larger_rendering_reduced(folder: Path) -> None:
         as_whole = dataset.reduced(effect(tile, params[None]).clamp(0, 1))[0]
     assert float((as_part - item["example"]).abs().max()) <= 1 / 255 + 1e-6
     assert float((as_whole - item["example"]).abs().mean()) > 0.01
+
+
+def test_rendered_examples_are_cached_for_later_runs(folder: Path, tmp_path: Path) -> None:
+    photos, _ = read_photos(photo_files(folder), min_side=64)
+    first = ExampleDataset(photos, "cartoon", size=32, length=5, seed=4)
+    rendered = [first[i] for i in (0, 3)]
+    path = first.save_cache(tmp_path)
+    again = ExampleDataset(photos, "cartoon", size=32, length=5, seed=4)
+    assert again.load_cache(tmp_path) == 2 and again.cache_path(tmp_path) == path
+    for index, item in zip((0, 3), rendered):
+        assert all(torch.equal(item[k], again[index][k]) for k in ("photo", "example", "params"))
+    other = ExampleDataset(photos, "cartoon", size=32, length=5, seed=5)
+    assert other.load_cache(tmp_path) == 0 and other.cache_path(tmp_path) != path
+    path.rename(other.cache_path(tmp_path))
+    with pytest.raises(WiseError, match="an example cache of other settings"):
+        other.load_cache(tmp_path)
 
 
 def test_losses_in_parameter_and_image_space() -> None:

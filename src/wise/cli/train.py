@@ -44,6 +44,8 @@ def run_train_global(args: argparse.Namespace, out: TextIO) -> int:
             "--backbone-weights: the 'simple' architecture has no ImageNet backbone; use resnet or multifeature"
         )
     run_folder = OutputFolder(args.output, RUN_FILES, {"--backbone-weights": args.backbone_weights})
+    if args.cache is not None:
+        OutputFolder(args.cache, (), {})
     settings = TrainSettings(
         effect=args.effect,
         images=args.images,
@@ -66,6 +68,7 @@ def run_train_global(args: argparse.Namespace, out: TextIO) -> int:
         half=args.half,
         checkpoint_every=args.checkpoint_every,
         backbone_weights=args.backbone_weights,
+        cache=args.cache,
     )
     photos = prepare(settings, Path(args.output), args.resume)
     from wise.train.run import train_global  # Lightning
@@ -131,5 +134,10 @@ def register(commands: argparse._SubParsersAction) -> None:
         "--checkpoint-every", type=types.iterations, default=200, metavar="N", help="steps between checkpoints (200)"
     )
     parser.add_argument("--backbone-weights", metavar="FILE", help="ImageNet weights of the backbone (safetensors)")
+    parser.add_argument(
+        "--cache",
+        metavar="DIR",
+        help="keep the rendered examples here for later runs with the same settings and photos",
+    )
     add_pixel_limit(parser)
     parser.set_defaults(func=run_train_global)

@@ -15,17 +15,21 @@ as tiles) and each example is rendered once and kept (8-bit) for later epochs.
 
 from __future__ import annotations
 
+import hashlib
 import math
 from pathlib import Path
 
 import torch
 import torch.nn.functional as F
+from safetensors.torch import save as st_save
 from torch.utils.data import Dataset
 
+import wise
 from wise import effects
 from wise.errors import WiseError
+from wise.files import read_safetensors
 from wise.filters._checks import REFERENCE_SHORT_SIDE
-from wise.io import read_image
+from wise.io import atomic_path, read_image
 from wise.optimize.benchmark import MAX_DRAWS, MIN_REFERENCE_CONTRAST
 
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".webp", ".tif", ".tiff"}
@@ -36,6 +40,8 @@ SCALE_RANGE = (0.6, 1.0)
 PRESET_SPREAD = 0.1
 """Standard deviation (normalized units) of parameters drawn around a preset."""
 SAMPLINGS = ("uniform", "presets")
+MAX_CACHE_BYTES = 16 * 1000**3
+"""Largest example cache read back."""
 
 
 def photo_files(folder: str | Path) -> list[Path]:
@@ -112,8 +118,9 @@ class ExampleDataset(Dataset):
 
     Item ``i`` is the same every time it is asked for (drawn from a generator seeded with
     ``seed`` and ``i``), so runs are reproducible and validation sets fixed; it is rendered on
-    first use and kept. Parameters whose example is nearly blank are drawn again, as in the
-    benchmarks. Returns dicts of ``photo`` and ``example`` ``(3, window, window)`` in [0, 1]
+    first use and kept. A window and parameters whose example is nearly blank are drawn
+    again (a flat patch of sky shows nothing of the parameters), as the benchmarks redraw
+    blank references. Returns dicts of ``photo`` and ``example`` ``(3, window, window)`` in [0, 1]
     and ``params`` ``(P,)``.
     """
 
@@ -186,13 +193,65 @@ class ExampleDataset(Dataset):
     def _make(self, index: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         generator = torch.Generator().manual_seed((self.seed * 1_000_003 + index) % 2**63)
         photo = self.photos[int(torch.randint(0, len(self.photos), (), generator=generator))]
-        tile, origin = self._tile(photo, generator)
         for _ in range(MAX_DRAWS):
+            tile, origin = self._tile(photo, generator)
             params = self._params(generator)
             example = self.render(tile, params[None], origin)
             if float(example.std()) >= MIN_REFERENCE_CONTRAST:
                 break
         return _as_bytes(self.reduced(tile))[0], _as_bytes(self.reduced(example))[0], params
+
+    def cache_key(self) -> str:
+        """A digest of everything the examples depend on: settings, photos and package version."""
+        digest = hashlib.sha256()
+        fields = (wise.__version__, self.effect_name, self.size, self.render_size, self.window, self.length)
+        digest.update(repr((*fields, self.sampling, self.seed)).encode())
+        for photo in self.photos:
+            digest.update(repr(tuple(photo.shape)).encode())
+            digest.update(photo.contiguous().numpy().tobytes())
+        return digest.hexdigest()
+
+    def cache_path(self, folder: str | Path) -> Path:
+        return Path(folder) / f"{self.effect_name}-{self.cache_key()[:16]}.safetensors"
+
+    def load_cache(self, folder: str | Path) -> int:
+        """Take the examples rendered by an earlier run with the same settings and photos from
+        ``folder`` (a safetensors file, checked); returns how many were taken."""
+        path = self.cache_path(folder)
+        if not path.is_file():
+            return 0
+        tensors, metadata = read_safetensors(path, "example cache", MAX_CACHE_BYTES)
+        shapes = {"photo": (self.window,) * 2, "example": (self.window,) * 2}
+        indices = tensors.get("index")
+        if metadata.get("key") != self.cache_key() or indices is None or indices.dim() != 1:
+            raise WiseError(f"{path}: an example cache of other settings; remove it or choose another --cache folder")
+        count = indices.shape[0]
+        for name, shape in shapes.items():
+            found = tensors.get(name)
+            if found is None or found.dtype != torch.uint8 or tuple(found.shape) != (count, 3, *shape):
+                raise WiseError(f"{path}: a damaged example cache; remove it")
+        params = tensors.get("params")
+        if params is None or tuple(params.shape) != (count, len(self._effect.param_specs)):
+            raise WiseError(f"{path}: a damaged example cache; remove it")
+        for row, index in enumerate(indices.tolist()):
+            if 0 <= index < self.length:
+                self._kept[index] = (tensors["photo"][row], tensors["example"][row], params[row].float())
+        return count
+
+    def save_cache(self, folder: str | Path) -> Path:
+        """Write the examples rendered so far into ``folder`` for later runs (atomically)."""
+        indices = sorted(self._kept)
+        path = self.cache_path(folder)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tensors = {
+            "index": torch.tensor(indices, dtype=torch.int64),
+            "photo": torch.stack([self._kept[i][0] for i in indices]),
+            "example": torch.stack([self._kept[i][1] for i in indices]),
+            "params": torch.stack([self._kept[i][2] for i in indices]),
+        }
+        with atomic_path(path) as tmp:
+            Path(tmp).write_bytes(st_save(tensors, metadata={"key": self.cache_key()}))
+        return path
 
     def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
         if not 0 <= index < self.length:

@@ -136,6 +136,9 @@ def train_global(
         settings.render_size,
         settings.window,
     )
+    if settings.cache is not None:
+        for dataset in (train_set, validation_set):
+            dataset.load_cache(settings.cache)
     data = ExampleData(train_set, validation_set, settings.batch, settings.seed)
     module = GlobalPPN(settings.effect, settings.architecture, settings.loss, settings.lr, settings.size)
     if settings.backbone_weights is not None:
@@ -178,6 +181,9 @@ def train_global(
             **throughput.rates(trainer.world_size),
         }
         if trainer.is_global_zero:
+            if settings.cache is not None:
+                for dataset in (train_set, validation_set):
+                    dataset.save_cache(settings.cache)
             info = ModelInfo(
                 effect=settings.effect,
                 architecture=settings.architecture,

@@ -57,6 +57,8 @@ class TrainSettings:
     half: bool = False
     checkpoint_every: int = 200
     backbone_weights: str | None = None
+    cache: str | None = None
+    """A folder for the rendered examples, reused by later runs with the same settings and photos."""
 
     def check(self) -> None:
         effects.create(self.effect)
@@ -104,27 +106,30 @@ def check_resumed(folder: Path, settings: TrainSettings) -> None:
 
 
 def load_photos(settings: TrainSettings) -> tuple[list[torch.Tensor], list[torch.Tensor], list[str]]:
-    """Training and validation photos (disjoint), and notes on skipped files."""
+    """Training and validation photos (disjoint: other files, or a share of the readable
+    training photos held out), and notes on skipped files."""
     files = photo_files(settings.images)
-    if settings.val_images is not None:
-        validation_files = photo_files(settings.val_images)
-        shared = {p.resolve() for p in files} & {p.resolve() for p in validation_files}
-        if shared:
-            raise WiseError(
-                f"{settings.val_images}: {len(shared)} validation photos are also training photos "
-                f"(e.g. {sorted(shared)[0].name}); keep the folders apart"
-            )
-        training_files = files
-    else:
-        training_files, validation_files = split_files(files, VALIDATION_SHARE, settings.seed)
     largest = math.ceil(settings.render_size / SCALE_RANGE[0])
-    training, note = checked_photos(settings.images, training_files, settings.size, largest)
+    if settings.val_images is None:
+        photos, note = checked_photos(settings.images, files, settings.size, largest)
+        order = list(range(len(photos)))
+        kept, held_out = split_files(order, VALIDATION_SHARE, settings.seed)  # type: ignore[arg-type]
+        return [photos[i] for i in kept], [photos[i] for i in held_out], [note] if note else []
+    validation_files = photo_files(settings.val_images)
+    shared = {p.resolve() for p in files} & {p.resolve() for p in validation_files}
+    if shared:
+        raise WiseError(
+            f"{settings.val_images}: {len(shared)} validation photos are also training photos "
+            f"(e.g. {sorted(shared)[0].name}); keep the folders apart"
+        )
+    training, note = checked_photos(settings.images, files, settings.size, largest)
     validation, skipped = read_photos(validation_files, settings.size, largest)
     if not validation:
-        where = settings.val_images or settings.images
-        raise WiseError(f"{where}: no readable validation photos of at least {settings.size} pixels a side")
+        raise WiseError(
+            f"{settings.val_images}: no readable validation photos of at least {settings.size} pixels a side"
+        )
     notes = [note] if note else []
-    if skipped and settings.val_images is not None:
+    if skipped:
         notes.append(f"{settings.val_images}: skipped {len(skipped)} unreadable or too small files")
     return training, validation, notes
 
