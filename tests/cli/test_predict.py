@@ -4,6 +4,10 @@ from __future__ import annotations
 
 import io
 import json
+import os
+import subprocess
+import sys
+import time
 from contextlib import redirect_stdout
 from pathlib import Path
 
@@ -20,6 +24,12 @@ from wise.io import read_image
 from wise.optimize.benchmark import content_at, random_reference
 from wise.ppn.modelfile import ModelInfo, save_model
 from wise.predict import Predictor
+
+SRC = Path(wise.__file__).resolve().parent.parent
+
+
+def _env() -> dict[str, str]:
+    return {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(SRC), os.environ.get("PYTHONPATH")]))}
 
 
 def _run(argv: list[str]) -> tuple[int, str]:
@@ -116,3 +126,24 @@ def test_recover_starts_from_the_prediction(files: dict[str, Path]) -> None:
     predicted = effect.params_to_dict(Predictor(str(model), "cartoon")(content, reference)[0])
     assert result["trials"][0]["found_params"] == pytest.approx(predicted, rel=1e-4, abs=1e-4)
     assert predicted != pytest.approx(effect.params_to_dict(effect.default_params()), rel=1e-3, abs=1e-3)
+
+
+@pytest.mark.parametrize("effect", ["xdog", "cartoon", "watercolor", "oilpaint"])
+def test_the_built_in_model_predicts_at_512_pixels_within_a_second(effect: str, tmp_path: Path) -> None:
+    photo = Image.fromarray(data.astronaut())
+    photo.save(tmp_path / "photo.png")
+    model = wise.effects.create(effect)
+    with torch.no_grad():
+        example = model(torch.from_numpy(np.array(photo)).permute(2, 0, 1)[None] / 255.0, model.default_params()[None])
+    Image.fromarray((example[0].permute(1, 2, 0).numpy() * 255).round().astype(np.uint8)).save(tmp_path / "ex.png")
+    began = time.perf_counter()
+    process = subprocess.run(
+        [sys.executable, "-m", "wise", "predict", effect, "--content", str(tmp_path / "photo.png"),
+         "--target", str(tmp_path / "ex.png"), "-o", str(tmp_path / "out")],
+        capture_output=True, text=True, env=_env(), timeout=120,
+    )  # fmt: skip
+    seconds = time.perf_counter() - began
+    assert process.returncode == 0, process.stderr
+    scores = json.loads((tmp_path / "out" / "metrics.json").read_text())
+    assert scores["model"] == f"builtin:{effect}" and scores["seconds"] < 1.0
+    assert seconds < 30.0  # 10 s on the development machine; CI machines are slower

@@ -58,6 +58,7 @@ def test_a_tiny_run_lowers_the_loss(photos: Path, tmp_path: Path) -> None:
     assert last < 0.6 * first, (first, last)
     network, info = load_model(tmp_path / "run" / "model.safetensors", "cartoon")
     assert info.architecture == "simple" and info.size == 32 and info.settings["steps_done"] == 120
+    assert info.settings["images"] == photos.name
     report = (tmp_path / "run" / "report.html").read_text()
     assert "<svg" in report and report.count("<img") == 3 * 6 and report.rstrip().endswith("</html>")
 

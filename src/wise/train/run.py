@@ -191,7 +191,7 @@ def train_global(
                 size=settings.size,
                 render_size=settings.render_size,
                 settings={
-                    **dataclasses.asdict(settings),
+                    **settings.shareable(),
                     "steps_done": trainer.global_step,
                     "processes": trainer.world_size,
                 },
@@ -199,7 +199,8 @@ def train_global(
             save_model(folder / MODEL_FILE, module.network, info, half=settings.half)
             write_training_report(folder / REPORT_FILE, module, validation_set, _log_files(folder), summary)
             print(
-                f"{trainer.global_step} steps, {summary['examples_per_second']:.1f} examples/s; "
+                f"{trainer.global_step} steps; {summary['examples_per_second']:.1f} examples/s in all, "
+                f"{summary['step_examples_per_second']:.1f} in the training steps; "
                 f"model: {folder / MODEL_FILE}; report: {folder / REPORT_FILE}",
                 file=out,
                 flush=True,

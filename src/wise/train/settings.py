@@ -27,6 +27,7 @@ LOGS = "logs"
 VALIDATION_SHARE = 0.15
 """Share of the photos held out for validation when no ``--val-images`` are given."""
 VALIDATION_EXAMPLES = 64
+PATH_SETTINGS = ("images", "val_images", "backbone_weights", "cache")
 RESUMABLE = ("effect", "architecture", "loss", "size", "render_size", "window", "batch", "examples", "sampling", "seed")
 """Settings a resumed run must share with the run it continues."""
 
@@ -59,6 +60,15 @@ class TrainSettings:
     backbone_weights: str | None = None
     cache: str | None = None
     """A folder for the rendered examples, reused by later runs with the same settings and photos."""
+
+    def shareable(self) -> dict:
+        """The settings for a model's metadata: folders and files by their names only, so a
+        model that is passed on does not carry the paths of the machine it was trained on."""
+        values = dataclasses.asdict(self)
+        for key in PATH_SETTINGS:
+            if values[key] is not None:
+                values[key] = Path(values[key]).name
+        return values
 
     def check(self) -> None:
         effects.create(self.effect)
