@@ -100,6 +100,50 @@ def _precision(accelerator: str) -> str:
     return "16-mixed" if uses_gpu else "32-true"
 
 
+def _datasets(
+    settings: TrainSettings, photos: tuple[list[torch.Tensor], list[torch.Tensor]]
+) -> tuple[ExampleDataset, ExampleDataset]:
+    """The training and validation examples (taken from the cache where it has them)."""
+    training_photos, validation_photos = photos
+    common = (settings.sampling,)
+    train_set = ExampleDataset(
+        training_photos, settings.effect, settings.size, settings.examples, *common,
+        seed=settings.seed, render_size=settings.render_size, window=settings.window,
+    )  # fmt: skip
+    validation_set = ExampleDataset(
+        validation_photos, settings.effect, settings.size, min(VALIDATION_EXAMPLES, settings.examples), *common,
+        seed=settings.seed + 1, render_size=settings.render_size, window=settings.window,
+    )  # fmt: skip
+    if settings.cache is not None:
+        for dataset in (train_set, validation_set):
+            dataset.load_cache(settings.cache)
+    return train_set, validation_set
+
+
+def _trainer(settings: TrainSettings, folder: Path, callbacks: list[Callback]) -> L.Trainer:
+    processes = settings.devices * settings.num_nodes
+    steps_per_epoch = settings.examples // (settings.batch * processes)
+    return L.Trainer(
+        accelerator=settings.accelerator,
+        devices=settings.devices,
+        num_nodes=settings.num_nodes,
+        strategy="ddp" if processes > 1 else "auto",
+        precision=_precision(settings.accelerator),
+        max_steps=settings.steps if settings.steps is not None else -1,
+        max_epochs=settings.epochs if settings.epochs is not None else (-1 if settings.steps else 1),
+        logger=CSVLogger(folder, name=LOGS, version=str(_log_part(folder))),
+        callbacks=callbacks,
+        default_root_dir=folder,
+        enable_checkpointing=False,
+        enable_model_summary=False,
+        use_distributed_sampler=False,
+        log_every_n_steps=max(1, min(10, steps_per_epoch)),
+        val_check_interval=min(steps_per_epoch, settings.checkpoint_every),
+        check_val_every_n_epoch=None if settings.steps else 1,
+        num_sanity_val_steps=0,
+    )
+
+
 def train_global(
     settings: TrainSettings,
     run_dir: str,
@@ -109,36 +153,13 @@ def train_global(
 ) -> dict:
     """Train, then write the model and the report into ``run_dir``; returns a summary
     (``interrupted`` when Ctrl-C ended it: the checkpoint and the model are still written).
-    ``photos`` are those of :func:`prepare` when it was called already."""
+    ``photos`` are those of :func:`prepare` when it was called already. A run resumed in the
+    middle of an epoch continues with the next one."""
     folder = Path(run_dir)
     if photos is None:
         photos = prepare(settings, folder, resume)
-    training_photos, validation_photos = photos
     L.seed_everything(settings.seed, verbose=False)
-    train_set = ExampleDataset(
-        training_photos,
-        settings.effect,
-        settings.size,
-        settings.examples,
-        settings.sampling,
-        settings.seed,
-        settings.render_size,
-        settings.window,
-    )
-    validation_examples = min(VALIDATION_EXAMPLES, settings.examples)
-    validation_set = ExampleDataset(
-        validation_photos,
-        settings.effect,
-        settings.size,
-        validation_examples,
-        settings.sampling,
-        settings.seed + 1,
-        settings.render_size,
-        settings.window,
-    )
-    if settings.cache is not None:
-        for dataset in (train_set, validation_set):
-            dataset.load_cache(settings.cache)
+    train_set, validation_set = _datasets(settings, photos)
     data = ExampleData(train_set, validation_set, settings.batch, settings.seed)
     module = GlobalPPN(settings.effect, settings.architecture, settings.loss, settings.lr, settings.size)
     if settings.backbone_weights is not None:
@@ -147,32 +168,14 @@ def train_global(
     if not is_launched_rank():
         with atomic_path(folder / SETTINGS_FILE) as path:
             Path(path).write_text(json.dumps(dataclasses.asdict(settings), indent=2) + "\n")
-    steps_per_epoch = settings.examples // (settings.batch * settings.devices * settings.num_nodes)
     with ctrl_c(out) as interruption:
         interruption.hold()
-        stopper = _Stopper(interruption, folder / CHECKPOINT, settings.checkpoint_every)
         throughput = _Throughput(settings.batch)
-        trainer = L.Trainer(
-            accelerator=settings.accelerator,
-            devices=settings.devices,
-            num_nodes=settings.num_nodes,
-            strategy="ddp" if settings.devices * settings.num_nodes > 1 else "auto",
-            precision=_precision(settings.accelerator),
-            max_steps=settings.steps if settings.steps is not None else -1,
-            max_epochs=settings.epochs if settings.epochs is not None else (-1 if settings.steps else 1),
-            logger=CSVLogger(folder, name="logs", version=str(_log_part(folder))),
-            callbacks=[stopper, throughput],
-            default_root_dir=folder,
-            enable_checkpointing=False,
-            enable_model_summary=False,
-            use_distributed_sampler=False,
-            log_every_n_steps=max(1, min(10, steps_per_epoch)),
-            val_check_interval=min(steps_per_epoch, max(1, settings.checkpoint_every)),
-            check_val_every_n_epoch=None if settings.steps else 1,
-            num_sanity_val_steps=0,
+        trainer = _trainer(
+            settings, folder, [_Stopper(interruption, folder / CHECKPOINT, settings.checkpoint_every), throughput]
         )
-        ckpt = folder / CHECKPOINT if resume else None
-        trainer.fit(module, datamodule=data, ckpt_path=ckpt, weights_only=True if ckpt else None)
+        checkpoint = folder / CHECKPOINT if resume else None
+        trainer.fit(module, datamodule=data, ckpt_path=checkpoint, weights_only=True if checkpoint else None)
         trainer.save_checkpoint(folder / CHECKPOINT, weights_only=False)
         summary = {
             "steps": trainer.global_step,
@@ -181,32 +184,36 @@ def train_global(
             **throughput.rates(trainer.world_size),
         }
         if trainer.is_global_zero:
-            if settings.cache is not None:
-                for dataset in (train_set, validation_set):
-                    dataset.save_cache(settings.cache)
-            info = ModelInfo(
-                effect=settings.effect,
-                architecture=settings.architecture,
-                parameters=module.effect.param_names,
-                size=settings.size,
-                render_size=settings.render_size,
-                settings={
-                    **settings.shareable(),
-                    "steps_done": trainer.global_step,
-                    "processes": trainer.world_size,
-                },
-            )
-            save_model(folder / MODEL_FILE, module.network, info, half=settings.half)
-            write_training_report(folder / REPORT_FILE, module, validation_set, _log_files(folder), summary)
-            print(
-                f"{trainer.global_step} steps; {summary['examples_per_second']:.1f} examples/s in all, "
-                f"{summary['step_examples_per_second']:.1f} in the training steps; "
-                f"model: {folder / MODEL_FILE}; report: {folder / REPORT_FILE}",
-                file=out,
-                flush=True,
-            )
+            _write_results(settings, folder, module, (train_set, validation_set), summary, out)
     summary["interrupted"] = summary["interrupted"] or interruption.received
     return summary
+
+
+def _write_results(
+    settings: TrainSettings,
+    folder: Path,
+    module: GlobalPPN,
+    datasets: tuple[ExampleDataset, ExampleDataset],
+    summary: dict,
+    out: TextIO,
+) -> None:
+    """The example cache, the model and the report of a finished or interrupted run."""
+    if settings.cache is not None:
+        for dataset in datasets:
+            dataset.save_cache(settings.cache)
+    shared = {**settings.shareable(), "steps_done": summary["steps"], "processes": summary["processes"]}
+    info = ModelInfo(
+        settings.effect, settings.architecture, module.effect.param_names, settings.size, settings.render_size, shared
+    )
+    save_model(folder / MODEL_FILE, module.network, info, half=settings.half)
+    write_training_report(folder / REPORT_FILE, module, datasets[1], _log_files(folder), summary)
+    print(
+        f"{summary['steps']} steps; {summary['examples_per_second']:.1f} examples/s in all, "
+        f"{summary['step_examples_per_second']:.1f} in the training steps; "
+        f"model: {folder / MODEL_FILE}; report: {folder / REPORT_FILE}",
+        file=out,
+        flush=True,
+    )
 
 
 def _load_backbone(network: torch.nn.Module, architecture: str, path: str) -> None:
