@@ -24,6 +24,8 @@ from wise.train.settings import TrainSettings, prepare
 ACCELERATORS = ("auto", "cpu", "gpu", "cuda", "mps")
 RUN_FILES = ("model.safetensors", "report.html", "settings.json")
 DEFAULT_STEPS = 1000
+DEFAULT_WINDOW = 128
+"""Training windows of the whole picture's pixels (rendering, the cost of training, grows with their area)."""
 
 
 def _check_accelerator(name: str) -> None:
@@ -53,7 +55,7 @@ def run_train_global(args: argparse.Namespace, out: TextIO) -> int:
         loss=args.loss,
         size=args.size,
         render_size=args.render_size,
-        window=args.window if args.window is not None else max(8, args.size // 2),
+        window=args.window if args.window is not None else min(DEFAULT_WINDOW, args.size),
         batch=args.batch,
         steps=None if args.epochs is not None else (args.steps or DEFAULT_STEPS),
         epochs=args.epochs,
@@ -90,9 +92,9 @@ def register(commands: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("-o", "--output", required=True, metavar="RUNDIR", help="folder of the run")
     parser.add_argument("--arch", choices=tuple(ARCHITECTURES), default="simple", help="network (default simple)")
-    parser.add_argument("--loss", choices=LOSSES, default="param-l1", help="loss (default param-l1)")
+    parser.add_argument("--loss", choices=LOSSES, default="image-l1", help="loss (default image-l1)")
     parser.add_argument(
-        "--size", type=types.working_size, default=128, metavar="PX", help="the network's input size (default 128)"
+        "--size", type=types.working_size, default=512, metavar="PX", help="the network's input size (default 512)"
     )
     parser.add_argument(
         "--render-size",
@@ -105,7 +107,7 @@ def register(commands: argparse._SubParsersAction) -> None:
         "--window",
         type=types.whole_number(8, types.MAX_WORKING_SIZE),
         metavar="PX",
-        help="side of the training windows at --size (default half of --size; rendering costs its square)",
+        help=f"side of the training windows at --size (default {DEFAULT_WINDOW}; rendering costs its square)",
     )
     parser.add_argument("--batch", type=types.batch, default=16, metavar="B", help="examples per step and process (16)")
     length = parser.add_mutually_exclusive_group()

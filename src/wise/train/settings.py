@@ -39,8 +39,8 @@ class TrainSettings:
     effect: str
     images: str
     architecture: str = "simple"
-    loss: str = "param-l1"
-    size: int = 128
+    loss: str = "image-l1"
+    size: int = 512
     render_size: int = 512
     window: int | None = None
     """Side of the training windows in network pixels (``size`` when None)."""
