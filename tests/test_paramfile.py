@@ -11,6 +11,8 @@ from pathlib import Path
 
 import pytest
 import torch
+
+from tests.effects.reference_xdog import REFERENCE_SKETCH
 from safetensors import safe_open
 from safetensors.torch import save_file
 
@@ -292,17 +294,20 @@ def test_out_of_range_values_warn_without_notes(tmp_path: Path, effect: Tiny) ->
 
 
 def test_a_preset_outside_its_range_loads_as_authored_and_bounds_the_span(tmp_path: Path) -> None:
-    xdog = effects.create("xdog")
+    class ReferenceXDoG(type(effects.create("xdog"))):
+        presets = {"reference_sketch": REFERENCE_SKETCH}
+
+    xdog = ReferenceXDoG()
     path = tmp_path / "sketch.safetensors"
-    save_params(path, xdog, xdog.preset("sketch"))
+    save_params(path, xdog, xdog.preset("reference_sketch"))
     notes: list[str] = []
-    assert torch.equal(load_params(path, xdog, notes=notes)[0], xdog.preset("sketch")) and notes == []
+    assert torch.equal(load_params(path, xdog, notes=notes)[0], xdog.preset("reference_sketch")) and notes == []
     index = xdog.param_names.index("stroke_width")
-    below = xdog.preset("sketch").clone()
+    below = xdog.preset("reference_sketch").clone()
     below[index] -= 0.1
     save_params(path, xdog, below)
     loaded = load_params(path, xdog, notes=notes)
-    authored = xdog.presets["sketch"]["stroke_width"]
+    authored = REFERENCE_SKETCH["stroke_width"]
     spec = xdog.spec("stroke_width")
     assert notes == [f"{path}: 1 value of stroke_width outside [{authored:g}, {spec.max:g}] clamped to the range"]
-    assert float(loaded[0, index]) == pytest.approx(float(xdog.preset("sketch")[index]))
+    assert float(loaded[0, index]) == pytest.approx(float(xdog.preset("reference_sketch")[index]))

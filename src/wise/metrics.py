@@ -7,6 +7,8 @@ import math
 import torch
 import torch.nn.functional as F
 
+from wise.filters.gaussian import gaussian_blur
+
 SSIM_SIGMA = 1.5
 SSIM_RADIUS = 5
 SSIM_K1, SSIM_K2 = 0.01, 0.03
@@ -42,3 +44,33 @@ def ssim(image: torch.Tensor, reference: torch.Tensor) -> float:
     c1, c2 = SSIM_K1**2, SSIM_K2**2
     score = ((2 * mu_x * mu_y + c1) * (2 * cov + c2)) / ((mu_x * mu_x + mu_y * mu_y + c1) * (var_x + var_y + c2))
     return float(score.mean())
+
+
+def stroke_orientation(image: torch.Tensor, sigma: float = 4.0) -> torch.Tensor:
+    """The dominant orientation of the strokes of an image as a doubled-angle field.
+
+    The luminance's smoothed structure tensor (derivatives by central differences, Gaussian
+    smoothing of ``sigma`` pixels) gives ``(xx - yy, 2 xy)``, which points at twice the
+    gradient angle and has the strength of the orientation as its length; the sign of a
+    direction does not matter in this form.
+
+    Args:
+        image: ``(B, C, H, W)``.
+        sigma: smoothing in pixels (not reference pixels).
+
+    Returns:
+        ``(B, 2, H, W)``.
+    """
+    grey = image.mean(dim=1, keepdim=True)
+    gy, gx = torch.gradient(grey, dim=(2, 3))
+    tensor = gaussian_blur(torch.cat((gx * gx, gx * gy, gy * gy), dim=1), sigma, scale=1.0)
+    return torch.cat((tensor[:, 0:1] - tensor[:, 2:3], 2.0 * tensor[:, 1:2]), dim=1)
+
+
+def orientation_agreement(first: torch.Tensor, second: torch.Tensor, sigma: float = 4.0) -> torch.Tensor:
+    """``cos(2 Δθ)`` per pixel between the stroke orientations of two images (see
+    :func:`stroke_orientation`): 1 where the strokes are parallel, -1 where they cross at a
+    right angle, 0 on average for unrelated orientations. ``(B, 1, H, W)``."""
+    a, b = stroke_orientation(first, sigma), stroke_orientation(second, sigma)
+    dot = (a * b).sum(dim=1, keepdim=True)
+    return dot / (a.norm(dim=1, keepdim=True) * b.norm(dim=1, keepdim=True) + 1e-12)

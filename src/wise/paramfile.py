@@ -19,7 +19,7 @@ Value policy on loading: NaN or infinite values are refused. Finite values outsi
 the effect's declared range are clamped to it, with one warning per file naming the
 parameters, how many values were out of range and the range in real units. The
 range a file may hold is widened to the presets that deliberately sit outside the
-declared range (the XDoG ``sketch`` preset has ``stroke_width`` 0.2 < 0.3), so a
+declared range, so a
 saved preset loads and renders as authored (:func:`accepted_span`). Deviations below
 :data:`RANGE_TOLERANCE` (rounding in a real-space file) are clamped without a
 warning.

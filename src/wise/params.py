@@ -8,8 +8,8 @@ scale for every parameter.
 What a range means: ``[min, max]`` is the range offered to people and to
 optimizers (sliders, ``--set``, random sampling and optimization clamp to it).
 The mapping itself is linear and defined everywhere, so an effect renders any
-finite value; a few presets deliberately sit outside the declared range (the
-reference XDoG ``sketch`` preset uses ``stroke_width`` 0.2 < 0.3) and render
+finite value; a preset may deliberately sit outside the declared range (the
+public reference XDoG's sketch values use ``stroke_width`` 0.2 < 0.3) and renders
 exactly as authored.
 
 Parameters come either global, shape ``(B, P)``, or as local masks

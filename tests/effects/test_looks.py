@@ -69,9 +69,12 @@ def test_the_paper_grain_shows_in_the_high_frequencies() -> None:
 
 
 def test_oil_strokes_are_parallel_in_flat_regions() -> None:
-    """On a flat, slightly noisy wall the strokes must be long and parallel, not swirls."""
+    """On a flat, slightly noisy wall under a faint light gradient the strokes must be long and
+    parallel, not swirls: the flow takes the wall's lighting, not the noise."""
     generator = torch.Generator().manual_seed(0)
-    wall = (0.7 + 0.01 * torch.randn(1, 1, 256, 256, generator=generator)).expand(1, 3, 256, 256)
+    ys, xs = torch.meshgrid(torch.arange(256.0), torch.arange(256.0), indexing="ij")
+    lighting = 0.0003 * (2.0 * xs + ys)  # 0.23 across the whole wall
+    wall = (0.6 + lighting + 0.01 * torch.randn(1, 1, 256, 256, generator=generator)).expand(1, 3, 256, 256)
     effect = wise.effects.create("oilpaint").eval()
     with torch.no_grad():
         painted = effect(wall.contiguous(), effect.preset("impasto")[None]).mean(dim=1, keepdim=True)
@@ -80,5 +83,27 @@ def test_oil_strokes_are_parallel_in_flat_regions() -> None:
     weight = (gx * gx + gy * gy)[32:-32, 32:-32]
     doubled = torch.complex(torch.cos(2 * angle), torch.sin(2 * angle)) * weight
     coherence = float(doubled.sum().abs() / weight.sum())
-    assert coherence > 0.8, coherence
+    assert coherence > 0.6, coherence  # swirls from the noise give below 0.1
     assert not math.isnan(coherence)
+
+
+def test_watercolor_rims_a_wash_boundary_but_not_soft_shading() -> None:
+    """Pigment pools where two washes meet; a soft shading ramp over the same lightness range,
+    with small faint spots on it like freckles or pores, gets no dark rims (the code before
+    this rule darkened the spots' surroundings by 0.08)."""
+    effect = wise.effects.create("watercolor").eval()
+    ramp = torch.linspace(0.85, 0.55, 256).view(1, 1, 1, 256).expand(1, 3, 256, 256).clone()
+    for y in range(24, 240, 32):
+        for x in range(24, 240, 32):
+            ramp[..., y : y + 4, x : x + 4] -= 0.08
+
+    def darkening(image: torch.Tensor) -> torch.Tensor:
+        profiles = []
+        for amount in (0.0, 2.5):
+            params = effect.params_from_dict({**QUIET, "edge_darkening": amount})[None]
+            with torch.no_grad():
+                profiles.append(effect(image, params)[0].mean(dim=0))
+        return profiles[0] - profiles[1]  # how much the rims darken
+
+    assert float(darkening(two_washes(256)).mean(dim=0)[100:160].max()) > 0.04
+    assert float(darkening(ramp)[16:-16, 16:-16].max()) < 0.02

@@ -5,6 +5,8 @@ import torch.nn.functional as F
 import wise
 from wise.errors import WiseError
 
+from tests.effects.reference_xdog import REFERENCE_PORTRAIT, REFERENCE_SKETCH
+
 
 @pytest.fixture(scope="module")
 def effect() -> wise.effects.Effect:
@@ -31,7 +33,7 @@ def test_api_and_presets(effect) -> None:
     portrait = effect.params_to_dict(effect.preset("portrait"))
     assert portrait["details"] == pytest.approx(2.27) and portrait["blackness"] == pytest.approx(0.15)
     sketch = effect.params_to_dict(effect.preset("sketch"))
-    assert sketch["stroke_width"] == pytest.approx(0.2)
+    assert sketch["shading"] > 0 and sketch["blackness"] < REFERENCE_SKETCH["blackness"]
     with pytest.raises(WiseError, match="no preset"):
         effect.preset("nope")
     with pytest.raises(WiseError, match="unknown effect"):
@@ -155,3 +157,23 @@ def test_shading_adds_tones_and_a_gradient_where_lines_are_white(effect, photo) 
     effect(photo, masks).mean().backward()
     shading_gradient = masks.grad[0, [s.name for s in effect.param_specs].index("shading")]
     assert float(shading_gradient[white[0, 0]].abs().mean()) > 0, "no gradient to darken flat white areas"
+
+
+def test_the_reference_values_render_as_authored(effect, photo) -> None:
+    """Fidelity is a property of the pipeline: the reference's values, passed explicitly,
+    render its look (the reference's sketch fills dark regions with black)."""
+    assert effect.params_to_dict(effect.preset("portrait")) == pytest.approx(REFERENCE_PORTRAIT)
+    reference_sketch = effect.params_from_dict(REFERENCE_SKETCH)
+    assert effect.params_to_dict(reference_sketch) == pytest.approx(REFERENCE_SKETCH)
+    with torch.no_grad():
+        drawing = effect(photo, reference_sketch[None])
+    assert float((drawing < 0.5).float().mean()) > 0.2
+
+
+def test_sketch_has_no_filled_black_regions(effect, astronaut) -> None:
+    with torch.no_grad():
+        drawing = effect(astronaut, effect.preset("sketch")[None])[:, :1]
+    dark = (drawing < 0.5).float()
+    assert float(dark.mean()) < 0.25
+    assert float(F.avg_pool2d(dark, 32, stride=16).max()) < 0.9
+    assert float(((drawing > 0.05) & (drawing < 0.95)).float().mean()) > 0.1  # light pencil tones

@@ -11,6 +11,7 @@ from wise.effects.base import Effect, RenderContext
 from wise.effects.common import LUMINANCE_RANGE, colour_adjustments, detail_sigmas
 from wise.filters import (
     adjust_color,
+    coarse_structure_tensor,
     edge_tangent_flow,
     flow_smoothing,
     gradient_direction,
@@ -20,7 +21,7 @@ from wise.filters import (
     rgb_to_lab,
     smoothed_structure_tensor,
 )
-from wise.filters.gaussian import SUPPORT
+from wise.filters.gaussian import SUPPORT, local_deviation
 from wise.filters.log import flow_log
 from wise.filters.noise import value_noise
 from wise.filters.shading import bump_phong
@@ -39,8 +40,12 @@ RELAX_THRESHOLD = 48.0
 replaced: skin, sky and walls have less, the contours of shapes far more."""
 RELAX_GAIN = 8.0
 """Weight of the spread strong structure against the weak local one."""
-DEFAULT_STROKE_ANGLE = math.pi / 4
-"""Gradient angle of the flow where no structure is near: diagonal strokes, lower left to upper right."""
+COARSE_FLOW_BLUR = 8.0
+"""Blur before the coarse structure tensor (reference pixels): the shading of a surface
+without the noise of its texture."""
+WIDE_FLOW_SIGMA = 48.0
+"""Scale of the picture's structure that orients the strokes where no strong edge is near
+(reference pixels): the shading of a cheek, the lighting of a wall."""
 ABSTRACTION_FACTOR = 2
 """The colour abstraction runs at 1/2 resolution and is joint-bilaterally upsampled."""
 UPSAMPLING_RANGE = 12.0
@@ -58,8 +63,18 @@ MAX_STROKE_STEPS = 20
 reference pixels) is sampled every bristle cell, so no stroke breaks into dashes."""
 MAX_EDGE_STEPS = 6
 """Most samples per side of the edge-enhancing LoG."""
-LIGHT_DIRECTION = (-1.0, -1.0, 1.5)
-"""Light from the top left, in front of the canvas."""
+RELIEF_FLOOR = 0.45
+"""Share of the relief left where the paint does not vary (skin, sky): soft, still visible strokes."""
+RELIEF_VARIATION = 0.03
+"""Local deviation of the paint's lightness (L* / 100) at which the relief is halfway to full."""
+VARIATION_SIGMA = 4.0
+"""Window of that deviation (reference pixels)."""
+CAVITY_SHADE = 0.25
+"""Darkening of the grooves and lightening of the ridges per unit of paint height and relief:
+paint catches ambient light by its height, so strokes of every direction show, also those
+running towards the light."""
+LIGHT_DIRECTION = (0.0, -1.0, 1.5)
+"""Light from above, in front of the canvas: no side is preferred, so a mirrored picture is lit as the mirror of the picture."""
 
 
 def _low_resolution(value: torch.Tensor) -> torch.Tensor:
@@ -137,12 +152,13 @@ class OilPaint(Effect):
         self.seed = seed
 
     def halo(self, scale: float) -> int:
-        flow_reach = (FLOW_DERIVATIVE + SUPPORT * (FLOW_SMOOTHING + RELAX_SIGMA)) * scale
+        flow_reach = (FLOW_DERIVATIVE + SUPPORT * (max(FLOW_SMOOTHING + RELAX_SIGMA, COARSE_FLOW_BLUR + WIDE_FLOW_SIGMA))) * scale
         stroke_spec, brush_spec = self.spec("stroke_length"), self.spec("brush_size")
         texture_reach = SUPPORT * (stroke_spec.max + brush_spec.max) * scale
         abstraction_reach = ABSTRACTION_FACTOR * (2 * 2 * 2 * self.kernel_size * math.sqrt(2.0) + 4)
         edge_reach = SUPPORT * 2 * EDGE_SIGMA * scale
-        return math.ceil(flow_reach + max(texture_reach, abstraction_reach, edge_reach)) + 4
+        variation_reach = SUPPORT * VARIATION_SIGMA * scale
+        return math.ceil(flow_reach + max(texture_reach, abstraction_reach + variation_reach, edge_reach)) + 4
 
     def paint_height(
         self, tangent: torch.Tensor, stroke_length: torch.Tensor, brush_size: torch.Tensor, ctx: RenderContext
@@ -161,13 +177,15 @@ class OilPaint(Effect):
         adjusted = self.recomputed(adjust_color, image, **colour_adjustments(p))
         lab = self.recomputed(rgb_to_lab, adjusted)
         local = self.stage(smoothed_structure_tensor, lab[:, :1], FLOW_DERIVATIVE, FLOW_SMOOTHING, scale)
+        coarse = self.stage(coarse_structure_tensor, lab[:, :1], COARSE_FLOW_BLUR, FLOW_DERIVATIVE, scale)
         structure = self.stage(
             relaxed_structure_tensor,
             local * (scale * scale),
+            coarse * (scale * scale),
             RELAX_SIGMA,
             RELAX_THRESHOLD,
             RELAX_GAIN,
-            DEFAULT_STROKE_ANGLE,
+            WIDE_FLOW_SIGMA,
             scale,
         )
         tangent = self.stage(edge_tangent_flow, structure)
@@ -187,15 +205,18 @@ class OilPaint(Effect):
         colours = self.recomputed(lab_to_rgb, abstracted)
 
         height = self.paint_height(tangent, p["stroke_length"], p["brush_size"], ctx)
+        variation = self.stage(local_deviation, abstracted[:, :1] / LUMINANCE_RANGE, VARIATION_SIGMA, scale)
+        relief = p["relief"] * (RELIEF_FLOOR + (1.0 - RELIEF_FLOOR) * variation / (variation + RELIEF_VARIATION))
         lit = self.stage(
             bump_phong,
             colours,
             height,
-            p["relief"],
+            relief,
             LIGHT_DIRECTION,
             specular=p["specular"],
             shininess=p["shininess"],
             scale=scale,
         )
+        lit = lit * (1.0 + CAVITY_SHADE * relief * torch.tanh(height))
         edges = self.stage(flow_log, abstracted[:, :1] / LUMINANCE_RANGE, tangent, EDGE_SIGMA, scale, MAX_EDGE_STEPS)
         return (lit - p["edge_enhancement"] * edges).clamp(0.0, 1.0)

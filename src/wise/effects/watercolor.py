@@ -52,6 +52,9 @@ CONTOUR_DETAILS = 2.0
 CONTOUR_STROKE = 0.5
 CONTOUR_STRENGTH = 1.0
 CONTOUR_THRESHOLD = 0.25
+RIM_THRESHOLD = 0.03
+"""Colour difference to the blurred washes below which no dark rim forms: small, faint
+features (pores, nostrils, soft shading) stay without one, boundaries between washes get it."""
 TREMOR_CELL = 10.0
 """Cell size of the hand tremor that wobbles the wash boundaries (reference pixels)."""
 TREMOR_AMPLITUDE = 2.0
@@ -118,9 +121,9 @@ class Watercolor(Effect):
             "bleeding": 6.0,
             "wobble": 1.2,
             "edge_darkening": 2.0,
-            "turbulence": 0.35,
+            "turbulence": 0.2,
             "dispersion": 0.05,
-            "granulation": 0.35,
+            "granulation": 0.2,
             "gaps_overlaps": 0.3,
             "paper": 0.7,
             "contour": 0.0,
@@ -133,13 +136,13 @@ class Watercolor(Effect):
             "flatness": 0.9,
             "bleeding": 0.5,
             "wobble": 0.8,
-            "edge_darkening": 3.0,
-            "turbulence": 0.2,
+            "edge_darkening": 2.5,
+            "turbulence": 0.12,
             "dispersion": 0.2,
-            "granulation": 0.7,
+            "granulation": 0.35,
             "gaps_overlaps": -0.7,
             "paper": 0.9,
-            "contour": 0.3,
+            "contour": 0.15,
         },
         "pale": {
             "brightness": 0.2,
@@ -150,9 +153,9 @@ class Watercolor(Effect):
             "bleeding": 3.0,
             "wobble": 1.0,
             "edge_darkening": 2.5,
-            "turbulence": 0.25,
+            "turbulence": 0.15,
             "dispersion": 0.05,
-            "granulation": 0.4,
+            "granulation": 0.3,
             "gaps_overlaps": -0.5,
             "paper": 0.8,
             "contour": 0.0,
@@ -223,8 +226,12 @@ class Watercolor(Effect):
         reduction = WASH_REDUCTION if scale >= WASH_REDUCTION_FROM_SCALE else 1
         bled = self._washes(adjusted, structure, edges, turbulence_noise, p, scale, reduction)
         flat = self.stage(flat_washes, bled, luminance / LUMINANCE_RANGE, p["flatness"], scale=scale)
-        wobbled = self.stage(wobble, flat, paper + TREMOR_AMPLITUDE * tremor, WOBBLE_GAIN * p["wobble"], scale)
-        darkened = self.stage(edge_darkening, wobbled, p["edge_darkening"], scale=scale)
+        relief = paper + TREMOR_AMPLITUDE * tremor
+        wobbled = self.stage(wobble, flat, relief, WOBBLE_GAIN * p["wobble"], scale)
+        wobbled_washes = self.stage(wobble, bled, relief, WOBBLE_GAIN * p["wobble"], scale)
+        darkened = self.stage(
+            edge_darkening, wobbled, p["edge_darkening"], scale=scale, guide=wobbled_washes, threshold=RIM_THRESHOLD
+        )
         density = (
             1.0
             + TURBULENCE_GAIN * p["turbulence"] * (2.0 * turbulence_noise - 1.0)

@@ -21,6 +21,7 @@ from wise.filters.shading import bump_phong
 from wise.filters.structure import (
     edge_tangent_flow,
     gradient_direction,
+    coarse_structure_tensor,
     relaxed_structure_tensor,
     smoothed_structure_tensor,
     structure_tensor,
@@ -56,6 +57,7 @@ __all__ = [
     "rgb_to_hsv",
     "rgb_to_lab",
     "sample",
+    "coarse_structure_tensor",
     "relaxed_structure_tensor",
     "smoothed_structure_tensor",
     "structure_tensor",

@@ -22,6 +22,8 @@ PYRAMID_SIGMA = 3.0
 up to interpolation, a fraction of the cost), keeping at least this sigma at the reduced size."""
 MAX_PYRAMID_REDUCTION = 8
 """Largest reduction factor (the tile alignment of :mod:`wise.render`)."""
+_DEVIATION_EPS = 1e-8
+"""Keeps the square root of a zero variance differentiable."""
 
 
 def in_support(distance: torch.Tensor | float, sigma: torch.Tensor, nearest: bool) -> torch.Tensor:
@@ -103,3 +105,21 @@ def gaussian_blur(image: torch.Tensor, sigma: ParamLike, scale: float | None = N
         return _blur_axis_fixed(_blur_axis_fixed(image, pixels, 3), pixels, 2)
     pixels = (as_map(sigma, image, "sigma") * s).clamp_min(MIN_SIGMA)
     return _blur_axis_varying(_blur_axis_varying(image, pixels, 3), pixels, 2)
+
+
+def local_deviation(image: torch.Tensor, sigma: float, scale: float | None = None) -> torch.Tensor:
+    """The local standard deviation of each channel in a Gaussian window,
+    ``sqrt(G * x^2 - (G * x)^2)``: how much an image varies around each pixel.
+
+    Args:
+        image: ``(B, C, H, W)``.
+        sigma: window in pixels of a 512-pixel short side.
+        scale: pixels per reference pixel (default ``min(H, W) / 512``).
+
+    Returns:
+        ``(B, C, H, W)``, non-negative.
+    """
+    check_image(image)
+    mean = gaussian_blur(image, sigma, scale)
+    variance = (gaussian_blur(image * image, sigma, scale) - mean * mean).clamp_min(0.0)
+    return torch.sqrt(variance + _DEVIATION_EPS) - math.sqrt(_DEVIATION_EPS)

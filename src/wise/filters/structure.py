@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import math
-
 import torch
 
 from wise.filters._checks import ParamLike, as_map, check_image, resolution_scale
@@ -58,6 +56,15 @@ def structure_tensor(image: torch.Tensor, sigma: ParamLike = 1.0, scale: float |
     return torch.stack(((fx * fx).sum(1), (fx * fy).sum(1), (fy * fy).sum(1)), dim=1)
 
 
+def coarse_structure_tensor(
+    image: torch.Tensor, sigma_blur: float, sigma_derivative: ParamLike = 1.0, scale: float | None = None
+) -> torch.Tensor:
+    """:func:`structure_tensor` of ``image`` blurred by ``sigma_blur`` (reference pixels): the
+    structure at a coarse scale, the slow shading of a surface rather than its noise. ``(B, 3, H, W)``."""
+    s = resolution_scale(image) if scale is None else scale
+    return structure_tensor(gaussian_blur(image, sigma_blur, scale=s), sigma_derivative, s)
+
+
 def smoothed_structure_tensor(
     image: torch.Tensor, sigma_derivative: ParamLike = 1.0, sigma_smoothing: ParamLike = 2.0, scale: float | None = None
 ) -> torch.Tensor:
@@ -94,50 +101,65 @@ def anisotropy(tensor: torch.Tensor) -> torch.Tensor:
     return torch.sqrt((xx - yy) ** 2 + 4.0 * xy * xy + _ATAN_EPS)
 
 
-def direction_tensor(angle: float, like: torch.Tensor) -> torch.Tensor:
-    """The unit structure tensor of a gradient at ``angle`` radians (image coordinates), shaped
-    ``(1, 3, 1, 1)`` on the device and dtype of ``like``; its flow runs at ``angle + 90°``."""
-    gx, gy = math.cos(angle), math.sin(angle)
-    return like.new_tensor((gx * gx, gx * gy, gy * gy)).view(1, 3, 1, 1)
+def unit_deviator(tensor: torch.Tensor) -> torch.Tensor:
+    """The direction of a structure tensor at unit strength: its traceless part divided by its
+    anisotropy, ``(T - tr(T)/2 I) / a``. It has the eigenvectors of ``T`` and eigenvalues
+    ``+-1/2``, so adding it to another tensor turns that one's flow towards ``T``'s by a fixed
+    amount however weak ``T`` is. ``(B, 3, H, W)``."""
+    half_difference = 0.5 * (tensor[:, 0:1] - tensor[:, 2:3])
+    strength = anisotropy(tensor)
+    return torch.cat((half_difference, tensor[:, 1:2], -half_difference), dim=1) / strength
 
 
 def relaxed_structure_tensor(
     tensor: torch.Tensor,
+    coarse: torch.Tensor,
     sigma: float,
     threshold: float,
     gain: float,
-    default_angle: float,
+    wide_sigma: float,
     scale: float | None = None,
 ) -> torch.Tensor:
     """A structure tensor relaxed where it is weak, so that the flow is calm in flat regions
-    (after the flow relaxation of Semmo et al. 2016, "Image stylization by interactive oil
-    paint filtering").
+    and follows the picture's form (after the flow relaxation of Semmo et al. 2016, "Image
+    stylization by interactive oil paint filtering", which relaxes the flow from the image's
+    own structure at a larger scale).
 
     With the confidence ``c = a / (a + threshold)`` of the anisotropy ``a``, the strong
-    structure is spread over a wide neighbourhood, ``W = G_sigma * (c S)``, and added where the
-    local structure is weak:
+    structure is spread over a neighbourhood, ``N = G_sigma * (c S)``, and the structure at a
+    coarse scale ``S_c`` (the tensor of the blurred picture, where noise has averaged out),
+    with the strong local structure, over a wider one, ``W = G_wide * (S_c + gain c S)``;
+    both are added where the local structure
+    is weak:
 
-        S' = S + (1 - c) (gain W + threshold D)
+        S' = S + (1 - c) (gain N + threshold U(W))
 
-    Near edges ``S'`` is the local tensor; in flat regions the flow follows the nearby strong
-    edges, and where there are none the default direction ``D`` (a unit tensor of a gradient
-    at ``default_angle``) keeps it parallel instead of following noise.
+    where ``U`` is :func:`unit_deviator`. Near edges ``S'`` is the local tensor; in flat
+    regions the flow follows the strong edges nearby, and where there are none the direction
+    of the picture's structure at the wide scale (the slow shading of a cheek, the lighting
+    of a wall), at a fixed strength however weak it is. No direction is preferred, so the
+    flow of a mirrored picture is the mirrored flow.
 
     Args:
         tensor: ``(B, 3, H, W)`` structure tensor in (value per reference pixel)^2, e.g.
             :func:`smoothed_structure_tensor` times ``scale ** 2``.
-        sigma: reach of the relaxation in pixels of a 512-pixel short side.
+        coarse: ``(B, 3, H, W)`` structure tensor of the picture blurred at a coarse scale, in
+            the same units.
+        sigma: reach of the strong edges in pixels of a 512-pixel short side.
         threshold: anisotropy at which the local structure counts half (same units as ``tensor``).
         gain: weight of the spread strong structure against the weak local one.
-        default_angle: gradient angle (radians) of the flow where no structure is near.
+        wide_sigma: scale of the picture's structure that sets the flow where no strong edge
+            is near, in pixels of a 512-pixel short side.
         scale: pixels per reference pixel (default ``min(H, W) / 512``).
 
     Returns:
         ``(B, 3, H, W)``.
     """
     check_image(tensor, name="structure tensor", channels=3)
+    check_image(coarse, name="coarse structure tensor", channels=3)
     s = resolution_scale(tensor) if scale is None else scale
     confidence = anisotropy(tensor)
     confidence = confidence / (confidence + threshold)
-    wide = gaussian_blur(confidence * tensor, sigma, scale=s)
-    return tensor + (1.0 - confidence) * (gain * wide + threshold * direction_tensor(default_angle, tensor))
+    near = gaussian_blur(confidence * tensor, sigma, scale=s)
+    wide = unit_deviator(gaussian_blur(coarse + gain * confidence * tensor, wide_sigma, scale=s))
+    return tensor + (1.0 - confidence) * (gain * near + threshold * wide)

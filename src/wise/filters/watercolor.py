@@ -94,30 +94,43 @@ def pigment_density(image: torch.Tensor, density: ParamLike) -> torch.Tensor:
 
 
 def edge_darkening(
-    image: torch.Tensor, amount: ParamLike, sigma: ParamLike = EDGE_SIGMA, scale: float | None = None
+    image: torch.Tensor,
+    amount: ParamLike,
+    sigma: ParamLike = EDGE_SIGMA,
+    scale: float | None = None,
+    *,
+    guide: torch.Tensor | None = None,
+    threshold: float = 0.0,
 ) -> torch.Tensor:
     """Edge darkening: pigment pools where a wash ends and dries there into a thin dark rim
     (Bousseau et al. 2006; the difference-of-blur edge of Montesdeoca et al. 2017).
 
-    The edge strength ``e = EDGE_GAIN * mean_c |C - G_sigma * C|`` is the difference between
-    the image and its Gaussian blur, averaged over the channels: it peaks at a wash's boundary
-    and is zero inside a flat wash, also where a boundary is soft. The colour is darkened with
-    :func:`pigment_density` at density ``d = 1 + amount * e``.
+    The edge strength ``e = EDGE_GAIN * max(mean_c |G - G_sigma * G| - threshold, 0)`` is the
+    difference between the ``guide`` (the image itself by default) and its Gaussian blur,
+    averaged over the channels: it peaks at a wash's boundary and is zero inside a flat wash,
+    also where a boundary is soft. The threshold leaves small, faint features without a rim.
+    The colour is darkened with :func:`pigment_density` at density ``d = 1 + amount * e``.
 
     Args:
         image: ``(B, C, H, W)`` colours in [0, 1].
         amount: darkening strength; a float, ``(B,)`` or ``(B, 1, H, W)``. 0 leaves the image unchanged.
         sigma: width of the rim, in pixels of a 512-pixel short side.
         scale: pixels per reference pixel (default ``min(H, W) / 512``).
+        guide: ``(B, C', H, W)`` picture whose boundaries get the rims, e.g. the washes before
+            their tones are flattened, so that the steps of flat tones inside soft shading get
+            none; ``image`` itself by default.
+        threshold: colour difference to the blur below which no rim forms.
 
     Returns:
         ``(B, C, H, W)``.
     """
     check_image(image)
+    guide = image if guide is None else guide
+    check_image(guide, name="guide")
     s = _scale(image, scale)
-    difference = image - gaussian_blur(image, sigma, scale=s)
+    difference = guide - gaussian_blur(guide, sigma, scale=s)
     magnitude = torch.sqrt(difference * difference + _MAGNITUDE_EPS * _MAGNITUDE_EPS) - _MAGNITUDE_EPS
-    strength = EDGE_GAIN * magnitude.mean(dim=1, keepdim=True)
+    strength = EDGE_GAIN * torch.relu(magnitude.mean(dim=1, keepdim=True) - threshold)
     return pigment_density(image, 1.0 + as_map(amount, image, "amount") * strength)
 
 
