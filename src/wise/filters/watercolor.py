@@ -30,6 +30,9 @@ EDGE_SIGMA = 2.0
 EDGE_GAIN = 8.0
 """Edge strength per unit of colour difference to the blurred image: a step of 0.3 between two
 washes gives a strength of about 1.2 at the boundary."""
+RIM_KNEE = 0.01
+"""Width of the soft knee at the rim threshold: below it the rim fades out smoothly, so the
+darkening keeps a gradient for optimization."""
 WET_SAMPLES = 6
 """Default number of samples on each side of a pixel for the wet-in-wet bleeding."""
 NOISE_FEATHERING = 0.5
@@ -105,10 +108,13 @@ def edge_darkening(
     """Edge darkening: pigment pools where a wash ends and dries there into a thin dark rim
     (Bousseau et al. 2006; the difference-of-blur edge of Montesdeoca et al. 2017).
 
-    The edge strength ``e = EDGE_GAIN * max(mean_c |G - G_sigma * G| - threshold, 0)`` is the
-    difference between the ``guide`` (the image itself by default) and its Gaussian blur,
-    averaged over the channels: it peaks at a wash's boundary and is zero inside a flat wash,
-    also where a boundary is soft. The threshold leaves small, faint features without a rim.
+    The edge strength comes from ``m = mean_c |G - G_sigma * G|``, the difference between the
+    ``guide`` (the image itself by default) and its Gaussian blur, averaged over the channels:
+    it peaks at a wash's boundary and is zero inside a flat wash, also where a boundary is
+    soft. ``e = EDGE_GAIN * m`` without a threshold; with one,
+    ``e = EDGE_GAIN * k * softplus((m - threshold) / k)`` (``k`` = :data:`RIM_KNEE`), a soft
+    ``max(m - threshold, 0)`` that leaves small, faint features without a rim and keeps a
+    gradient below the threshold.
     The colour is darkened with :func:`pigment_density` at density ``d = 1 + amount * e``.
 
     Args:
@@ -130,7 +136,8 @@ def edge_darkening(
     s = _scale(image, scale)
     difference = guide - gaussian_blur(guide, sigma, scale=s)
     magnitude = torch.sqrt(difference * difference + _MAGNITUDE_EPS * _MAGNITUDE_EPS) - _MAGNITUDE_EPS
-    strength = EDGE_GAIN * torch.relu(magnitude.mean(dim=1, keepdim=True) - threshold)
+    excess = (magnitude.mean(dim=1, keepdim=True) - threshold) / RIM_KNEE
+    strength = EDGE_GAIN * RIM_KNEE * F.softplus(excess) if threshold > 0 else EDGE_GAIN * magnitude.mean(dim=1, keepdim=True)
     return pigment_density(image, 1.0 + as_map(amount, image, "amount") * strength)
 
 
