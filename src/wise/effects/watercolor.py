@@ -226,9 +226,9 @@ class Watercolor(Effect):
         reduction = WASH_REDUCTION if scale >= WASH_REDUCTION_FROM_SCALE else 1
         bled = self._washes(adjusted, structure, edges, turbulence_noise, p, scale, reduction)
         flat = self.stage(flat_washes, bled, luminance / LUMINANCE_RANGE, p["flatness"], scale=scale)
-        relief = paper + TREMOR_AMPLITUDE * tremor
-        wobbled = self.stage(wobble, flat, relief, WOBBLE_GAIN * p["wobble"], scale)
-        wobbled_washes = self.stage(wobble, bled, relief, WOBBLE_GAIN * p["wobble"], scale)
+        trembling_paper = paper + TREMOR_AMPLITUDE * tremor
+        wobbled = self.stage(wobble, flat, trembling_paper, WOBBLE_GAIN * p["wobble"], scale)
+        wobbled_washes = self.stage(wobble, bled, trembling_paper, WOBBLE_GAIN * p["wobble"], scale)
         darkened = self.stage(
             edge_darkening, wobbled, p["edge_darkening"], scale=scale, guide=wobbled_washes, threshold=RIM_THRESHOLD
         )
