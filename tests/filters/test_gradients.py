@@ -44,6 +44,26 @@ def test_gaussian_blur(per_pixel: bool) -> None:
     _check(lambda i, s: W.gaussian_blur(i, s, scale=1.0), image, sigma)
 
 
+@pytest.mark.parametrize("sigma", [0.7, 3.0, 9.0])
+def test_fixed_gaussian_blur_analytic_backward(sigma: float) -> None:
+    # a global sigma takes the separable convolution with its own backward (and, from 6 pixels,
+    # the pyramid); the kernel may be wider than the image
+    _check(lambda i: W.gaussian_blur(i, sigma, scale=1.0), rand(2, 2, 7, 9))
+
+
+@pytest.mark.parametrize("distance", [1.0, 2.0])
+def test_structure_tensor_at_whole_pixels_matches_sampling(distance: float) -> None:
+    image = rand(2, 3, 9, 10)
+    fast = W.structure_tensor(image, distance, scale=1.0)
+    sampled = W.structure_tensor(image, torch.tensor(distance, dtype=DOUBLE), scale=1.0)
+    upstream = torch.randn_like(fast)
+    (grad_fast,) = torch.autograd.grad(fast, image, upstream)
+    (grad_sampled,) = torch.autograd.grad(sampled, image, upstream)
+    torch.testing.assert_close(fast, sampled, rtol=0, atol=1e-12)
+    torch.testing.assert_close(grad_fast, grad_sampled, rtol=0, atol=1e-12)
+    _check(lambda i: W.structure_tensor(i, distance, scale=1.0), image)
+
+
 def test_structure_tensor() -> None:
     image = rand(2, 1, 7, 8)
     sigma = rand(2, 1, 7, 8, low=0.55, high=0.9, seed=4)

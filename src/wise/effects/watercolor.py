@@ -227,8 +227,10 @@ class Watercolor(Effect):
         bled = self._washes(adjusted, structure, edges, turbulence_noise, p, scale, reduction)
         flat = self.stage(flat_washes, bled, luminance / LUMINANCE_RANGE, p["flatness"], scale=scale)
         trembling_paper = paper + TREMOR_AMPLITUDE * tremor
-        wobbled = self.stage(wobble, flat, trembling_paper, WOBBLE_GAIN * p["wobble"], scale)
-        wobbled_washes = self.stage(wobble, bled, trembling_paper, WOBBLE_GAIN * p["wobble"], scale)
+        # one displacement for both: the washes before flattening guide the rims
+        wobbled, wobbled_washes = self.stage(
+            wobble, torch.cat((flat, bled), dim=1), trembling_paper, WOBBLE_GAIN * p["wobble"], scale
+        ).chunk(2, dim=1)
         darkened = self.stage(
             edge_darkening, wobbled, p["edge_darkening"], scale=scale, guide=wobbled_washes, threshold=RIM_THRESHOLD
         )

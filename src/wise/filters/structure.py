@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import torch
+import torch.nn.functional as F
 
 from wise.filters._checks import ParamLike, as_map, check_image, resolution_scale
 from wise.filters.gaussian import gaussian_blur
@@ -20,6 +21,7 @@ _SOBEL_TAPS = (
     (1, 1, 1.0, 1.0),
 )
 _SOBEL_NORM = 8.0
+_WHOLE_PIXEL_TOLERANCE = 1e-6
 _ATAN_EPS = 1e-9
 
 
@@ -40,6 +42,11 @@ def structure_tensor(image: torch.Tensor, sigma: ParamLike = 1.0, scale: float |
     """
     check_image(image)
     s = resolution_scale(image) if scale is None else scale
+    if isinstance(sigma, (int, float)):
+        pixels = float(sigma) * s
+        if pixels >= 1.0 and abs(pixels - round(pixels)) < _WHOLE_PIXEL_TOLERANCE:
+            fx, fy = _sobel_at_whole_pixels(image, round(pixels))
+            return _tensor_components(fx, fy)
     distance = (as_map(sigma, image, "sigma") * s).clamp_min(1e-3)
     b, _, h, w = image.shape
     distance = distance.expand(b, 1, h, w)
@@ -53,7 +60,29 @@ def structure_tensor(image: torch.Tensor, sigma: ParamLike = 1.0, scale: float |
     fx, fy = tap_sum(tap, len(_SOBEL_TAPS), image, distance)
     fx = fx / distance
     fy = fy / distance
+    return _tensor_components(fx, fy)
+
+
+def _tensor_components(fx: torch.Tensor, fy: torch.Tensor) -> torch.Tensor:
     return torch.stack(((fx * fx).sum(1), (fx * fy).sum(1), (fy * fy).sum(1)), dim=1)
+
+
+def _sobel_at_whole_pixels(image: torch.Tensor, distance: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """The Sobel derivatives of :func:`structure_tensor` for a whole-pixel neighbour distance:
+    its bilinear samples are then shifted copies of the border-replicated image, taken here
+    by slicing instead of sampling (the same values, several times faster with backward)."""
+    h, w = image.shape[-2:]
+    padded = F.pad(image, (distance, distance, distance, distance), mode="replicate")
+
+    def shifted(dx: int, dy: int) -> torch.Tensor:
+        return padded[..., distance + dy * distance : distance + dy * distance + h, distance + dx * distance : distance + dx * distance + w]
+
+    right_minus_left = [shifted(1, dy) - shifted(-1, dy) for dy in (-1, 0, 1)]
+    below_minus_above = [shifted(dx, 1) - shifted(dx, -1) for dx in (-1, 0, 1)]
+    norm = _SOBEL_NORM * distance
+    fx = (right_minus_left[0] + 2.0 * right_minus_left[1] + right_minus_left[2]) / norm
+    fy = (below_minus_above[0] + 2.0 * below_minus_above[1] + below_minus_above[2]) / norm
+    return fx, fy
 
 
 def coarse_structure_tensor(
