@@ -5,6 +5,7 @@ from __future__ import annotations
 import torch
 
 from wise.filters._checks import ParamLike, as_map, check_image
+from wise.filters.clamp import inward_clamp
 
 # sRGB (IEC 61966-2-1) transfer function
 _SRGB_LINEAR_LIMIT = 0.04045
@@ -143,7 +144,8 @@ def adjust_color(
 
     In order: add ``brightness``, multiply by ``exposure``, scale ``contrast`` around
     mid-grey, shift the white balance by ``temperature`` (red up and blue down by half of it)
-    and ``tint`` (green down by it, red and blue up by half of it), clamp to [0, 1], scale the
+    and ``tint`` (green down by it, red and blue up by half of it), clamp to [0, 1] (an
+    :func:`~wise.filters.clamp.inward_clamp`: saturated pixels keep a gradient back), scale the
     HSV ``saturation``, rotate the hue by ``hue_shift`` (in turns), and apply ``gamma``
     (``x ** (1 / gamma)``). Brightness, temperature and tint are orthogonal RGB offsets: as
     masks they can set any colour per pixel.
@@ -161,7 +163,7 @@ def adjust_color(
     out = (out - 0.5) * as_map(contrast, image, "contrast") + 0.5
     if not (_is_number(temperature, 0.0) and _is_number(tint, 0.0)):
         out = out + _white_balance_shift(as_map(temperature, image, "temperature"), as_map(tint, image, "tint"))
-    out = out.clamp(0.0, 1.0)
+    out = inward_clamp(out)
     if not _is_number(saturation, 1.0):
         out = _scale_saturation(out, as_map(saturation, image, "saturation"))
     if not _is_number(hue_shift, 0.0):
@@ -170,4 +172,4 @@ def adjust_color(
         out = hsv_to_rgb(torch.cat((hue, hsv[:, 1:]), dim=1))
     if not _is_number(gamma, 1.0):
         out = out.clamp_min(_POW_FLOOR) ** (1.0 / as_map(gamma, image, "gamma").clamp_min(0.1))
-    return out.clamp(0.0, 1.0)
+    return inward_clamp(out)
