@@ -27,6 +27,45 @@ def test_loss_falls_towards_a_reference_of_the_same_effect(content: torch.Tensor
     assert outcome.params.min() >= -0.5 and outcome.params.max() <= 0.5
 
 
+def _saturated_start_run(content: torch.Tensor, mode: str) -> tuple[torch.Tensor, torch.Tensor, list[float]]:
+    effect = wise.effects.create("cartoon")
+    with torch.no_grad():
+        target = effect(content, effect.default_params()[None])
+    start = effect.params_from_dict({"brightness": 0.3, "contrast": 2.0})  # light half turns white
+    outcome = optimize(effect, content, target, start, Settings(mode=mode, iterations=40, levels=1))
+    assert outcome.result is not None
+    return outcome.result, target, outcome.losses
+
+
+def _wrongly_white(result: torch.Tensor, target: torch.Tensor) -> float:
+    return float(((result >= 0.999).all(1) & ~(target >= 0.999).all(1)).float().mean())
+
+
+def test_masks_bring_a_region_saturated_to_white_back(content: torch.Tensor, monkeypatch) -> None:
+    import contextlib
+
+    import wise.optimize.parametric as parametric
+
+    result, target, losses = _saturated_start_run(content, "local")
+    assert _wrongly_white(result, target) < 0.02
+    assert min(losses[-5:]) < 0.35 * losses[0]
+    # with a plain clamp the white region's mask pixels have no gradient and stay white
+    monkeypatch.setattr(parametric, "inward_gradients", lambda enabled=True: contextlib.nullcontext())
+    stuck, _, _ = _saturated_start_run(content, "local")
+    assert _wrongly_white(stuck, target) > 0.1
+
+
+def test_global_parameters_keep_the_plain_clamp(content: torch.Tensor, monkeypatch) -> None:
+    import contextlib
+
+    import wise.optimize.parametric as parametric
+
+    result, _, losses = _saturated_start_run(content, "global")
+    monkeypatch.setattr(parametric, "inward_gradients", lambda enabled=True: contextlib.nullcontext())
+    plain, _, plain_losses = _saturated_start_run(content, "global")
+    assert losses == plain_losses and torch.equal(result, plain)
+
+
 def test_interrupt_keeps_the_state_reached(content: torch.Tensor) -> None:
     effect = wise.effects.create("xdog")
     target = torch.ones_like(content)

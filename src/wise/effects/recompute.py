@@ -7,6 +7,7 @@ and keeps only its inputs; backward runs it again with autograd and differentiat
 
 from __future__ import annotations
 
+import contextvars
 from typing import Any, Callable
 
 import torch
@@ -16,6 +17,7 @@ class _Recompute(torch.autograd.Function):
     @staticmethod
     def forward(ctx, run: Callable[..., torch.Tensor], *tensors: torch.Tensor) -> torch.Tensor:  # type: ignore[override]
         ctx.run = run
+        ctx.context = contextvars.copy_context()  # recompute under the settings of the forward pass
         ctx.save_for_backward(*tensors)
         return run(*tensors)
 
@@ -25,7 +27,7 @@ class _Recompute(torch.autograd.Function):
         wanted = ctx.needs_input_grad[1:]
         leaves = [t.detach().requires_grad_(w) for t, w in zip(tensors, wanted)]
         with torch.enable_grad():
-            output = ctx.run(*leaves)
+            output = ctx.context.run(ctx.run, *leaves)
         targets = [t for t, w in zip(leaves, wanted) if w]
         grads = iter(torch.autograd.grad(output, targets, grad, allow_unused=True) if targets else ())
         return (None, *[next(grads) if w else None for w in wanted])

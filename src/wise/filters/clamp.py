@@ -1,8 +1,14 @@
-"""A clamp whose gradient can bring saturated values back into range."""
+"""A clamp whose gradient can bring saturated values back into range, for per-pixel optimization."""
 
 from __future__ import annotations
 
+from contextlib import contextmanager
+from contextvars import ContextVar
+from typing import Iterator
+
 import torch
+
+_INWARD_GRADIENTS: ContextVar[bool] = ContextVar("inward_gradients", default=False)
 
 
 class _InwardClamp(torch.autograd.Function):
@@ -20,13 +26,26 @@ class _InwardClamp(torch.autograd.Function):
         return grad.masked_fill(outward, 0.0), None, None
 
 
-def inward_clamp(image: torch.Tensor, low: float = 0.0, high: float = 1.0) -> torch.Tensor:
-    """``image.clamp(low, high)`` whose backward also passes the gradient of a value beyond the
-    range when following it (a descent step) moves the value back towards the range.
+@contextmanager
+def inward_gradients(enabled: bool = True) -> Iterator[None]:
+    """Within this context, :func:`inward_clamp` passes gradients back into range.
 
-    A plain clamp gives saturated pixels no gradient, so a per-pixel parameter that pushed its
-    pixels to white (brightness, contrast) can never bring them back: optimization is stuck
-    there. The forward result is exactly the plain clamp's.
+    For per-pixel parameter masks: a plain clamp gives saturated pixels no gradient, so a mask
+    that pushed its region to white (brightness, contrast) can never bring it back. Global
+    parameters do not need it: every pixel votes on them, and letting the saturated ones vote
+    as if unclamped would bias them away from where the others agree.
+    """
+    token = _INWARD_GRADIENTS.set(enabled)
+    try:
+        yield
+    finally:
+        _INWARD_GRADIENTS.reset(token)
+
+
+def inward_clamp(image: torch.Tensor, low: float = 0.0, high: float = 1.0) -> torch.Tensor:
+    """``image.clamp(low, high)``; within :func:`inward_gradients` its backward also passes the
+    gradient of a value beyond the range when following it (a descent step) moves the value
+    back towards the range. The forward result is always exactly the plain clamp's.
 
     Args:
         image: any shape.
@@ -35,6 +54,6 @@ def inward_clamp(image: torch.Tensor, low: float = 0.0, high: float = 1.0) -> to
     Returns:
         ``image`` clamped, same shape.
     """
-    if not image.requires_grad:
+    if not (image.requires_grad and _INWARD_GRADIENTS.get()):
         return image.clamp(low, high)
     return _InwardClamp.apply(image, low, high)

@@ -145,7 +145,8 @@ def adjust_color(
     In order: add ``brightness``, multiply by ``exposure``, scale ``contrast`` around
     mid-grey, shift the white balance by ``temperature`` (red up and blue down by half of it)
     and ``tint`` (green down by it, red and blue up by half of it), clamp to [0, 1] (an
-    :func:`~wise.filters.clamp.inward_clamp`: saturated pixels keep a gradient back), scale the
+    :func:`~wise.filters.clamp.inward_clamp`: within
+    :func:`~wise.filters.clamp.inward_gradients` saturated pixels keep a gradient back), scale the
     HSV ``saturation``, rotate the hue by ``hue_shift`` (in turns), and apply ``gamma``
     (``x ** (1 / gamma)``). Brightness, temperature and tint are orthogonal RGB offsets: as
     masks they can set any colour per pixel.

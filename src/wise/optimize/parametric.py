@@ -20,6 +20,7 @@ import torch
 from wise.effects.base import Effect
 from wise.errors import WiseError
 from wise.filters._checks import REFERENCE_SHORT_SIDE
+from wise.filters.clamp import inward_gradients
 from wise.filters.gaussian import gaussian_blur
 from wise.params import NORMALIZED_MAX, NORMALIZED_MIN, check_params
 from wise.vgg import StyleLoss, load_vgg19
@@ -156,7 +157,8 @@ def optimize(
     try:
         for iteration in range(1, settings.iterations + 1):
             optimizer.zero_grad(set_to_none=True)
-            output = effect(content, params)
+            with inward_gradients(params.dim() == 4):
+                output = effect(content, params)
             loss = image_loss(output)
             if settings.tv_weight > 0 and params.dim() == 4:
                 loss = loss + settings.tv_weight * total_variation(params)
