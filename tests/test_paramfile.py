@@ -11,11 +11,10 @@ from pathlib import Path
 
 import pytest
 import torch
-
-from tests.effects.reference_xdog import REFERENCE_SKETCH
 from safetensors import safe_open
 from safetensors.torch import save_file
 
+from tests.effects.reference_xdog import REFERENCE_SKETCH
 from wise import effects
 from wise.effects.base import Effect
 from wise.errors import WiseError, WiseWarning

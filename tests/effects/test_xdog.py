@@ -3,9 +3,8 @@ import torch
 import torch.nn.functional as F
 
 import wise
-from wise.errors import WiseError
-
 from tests.effects.reference_xdog import REFERENCE_PORTRAIT, REFERENCE_SKETCH
+from wise.errors import WiseError
 
 
 @pytest.fixture(scope="module")

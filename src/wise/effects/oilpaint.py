@@ -74,7 +74,8 @@ CAVITY_SHADE = 0.25
 paint catches ambient light by its height, so strokes of every direction show, also those
 running towards the light."""
 LIGHT_DIRECTION = (0.0, -1.0, 1.5)
-"""Light from above, in front of the canvas: no side is preferred, so a mirrored picture is lit as the mirror of the picture."""
+"""Light from above, in front of the canvas: no side is preferred, so a mirrored picture is lit
+as the mirror of the picture."""
 
 
 def _low_resolution(value: torch.Tensor) -> torch.Tensor:
@@ -152,7 +153,9 @@ class OilPaint(Effect):
         self.seed = seed
 
     def halo(self, scale: float) -> int:
-        flow_reach = (FLOW_DERIVATIVE + SUPPORT * (max(FLOW_SMOOTHING + RELAX_SIGMA, COARSE_FLOW_BLUR + WIDE_FLOW_SIGMA))) * scale
+        flow_reach = (
+            FLOW_DERIVATIVE + SUPPORT * (max(FLOW_SMOOTHING + RELAX_SIGMA, COARSE_FLOW_BLUR + WIDE_FLOW_SIGMA))
+        ) * scale
         stroke_spec, brush_spec = self.spec("stroke_length"), self.spec("brush_size")
         texture_reach = SUPPORT * (stroke_spec.max + brush_spec.max) * scale
         abstraction_reach = ABSTRACTION_FACTOR * (2 * 2 * 2 * self.kernel_size * math.sqrt(2.0) + 4)

@@ -19,9 +19,9 @@ from wise.filters.quantize import quantize
 from wise.filters.sampling import sample, tap_sum
 from wise.filters.shading import bump_phong
 from wise.filters.structure import (
+    coarse_structure_tensor,
     edge_tangent_flow,
     gradient_direction,
-    coarse_structure_tensor,
     relaxed_structure_tensor,
     smoothed_structure_tensor,
     structure_tensor,

@@ -37,11 +37,11 @@ def _kernel_radius(sigma_max: float) -> int:
     return max(1, math.ceil(SUPPORT * sigma_max))
 
 
-def _fixed_kernel(sigma: float, like: torch.Tensor) -> tuple[torch.Tensor, int]:
+def _fixed_kernel(sigma: float, like: torch.Tensor) -> torch.Tensor:
     radius = _kernel_radius(sigma)
     offsets = torch.arange(-radius, radius + 1, dtype=like.dtype, device=like.device)
     kernel = torch.exp(-offsets * offsets / (2.0 * sigma * sigma)) * (offsets.abs() <= max(SUPPORT * sigma, 1.0))
-    return kernel / kernel.sum(), radius
+    return kernel / kernel.sum()
 
 
 def _correlate_axis(image: torch.Tensor, kernel: torch.Tensor, axis: int, padding_mode: str) -> torch.Tensor:
@@ -89,8 +89,7 @@ class _FixedBlurAxis(torch.autograd.Function):
 
 
 def _blur_axis_fixed(image: torch.Tensor, sigma: float, axis: int) -> torch.Tensor:
-    kernel, _ = _fixed_kernel(sigma, image)
-    return _FixedBlurAxis.apply(image, kernel, axis)
+    return _FixedBlurAxis.apply(image, _fixed_kernel(sigma, image), axis)
 
 
 def _blur_by_pyramid(image: torch.Tensor, pixels: float) -> torch.Tensor:

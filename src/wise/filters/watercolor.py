@@ -136,8 +136,11 @@ def edge_darkening(
     s = _scale(image, scale)
     difference = guide - gaussian_blur(guide, sigma, scale=s)
     magnitude = torch.sqrt(difference * difference + _MAGNITUDE_EPS * _MAGNITUDE_EPS) - _MAGNITUDE_EPS
-    excess = (magnitude.mean(dim=1, keepdim=True) - threshold) / RIM_KNEE
-    strength = EDGE_GAIN * RIM_KNEE * F.softplus(excess) if threshold > 0 else EDGE_GAIN * magnitude.mean(dim=1, keepdim=True)
+    mean_magnitude = magnitude.mean(dim=1, keepdim=True)
+    if threshold > 0:
+        strength = EDGE_GAIN * RIM_KNEE * F.softplus((mean_magnitude - threshold) / RIM_KNEE)
+    else:
+        strength = EDGE_GAIN * mean_magnitude
     return pigment_density(image, 1.0 + as_map(amount, image, "amount") * strength)
 
 
