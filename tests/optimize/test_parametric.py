@@ -1,8 +1,11 @@
+import contextlib
+
 import pytest
 import torch
 import torch.nn.functional as F
 
 import wise
+import wise.optimize.parametric as parametric
 from wise.errors import WiseError
 from wise.optimize import Settings, optimize
 from wise.optimize.parametric import PYRAMIDS, optimize_coarse_to_fine, optimize_on_crops, pyramid
@@ -41,27 +44,24 @@ def _wrongly_white(result: torch.Tensor, target: torch.Tensor) -> float:
     return float(((result >= 0.999).all(1) & ~(target >= 0.999).all(1)).float().mean())
 
 
-def test_masks_bring_a_region_saturated_to_white_back(content: torch.Tensor, monkeypatch) -> None:
-    import contextlib
+def _plain_clamp(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Run the optimization without the clamp's gradient back into range."""
+    monkeypatch.setattr(parametric, "inward_gradients", lambda enabled=True: contextlib.nullcontext())
 
-    import wise.optimize.parametric as parametric
 
+def test_masks_bring_a_region_saturated_to_white_back(content: torch.Tensor, monkeypatch: pytest.MonkeyPatch) -> None:
     result, target, losses = _saturated_start_run(content, "local")
     assert _wrongly_white(result, target) < 0.02
     assert min(losses[-5:]) < 0.35 * losses[0]
     # with a plain clamp the white region's mask pixels have no gradient and stay white
-    monkeypatch.setattr(parametric, "inward_gradients", lambda enabled=True: contextlib.nullcontext())
+    _plain_clamp(monkeypatch)
     stuck, _, _ = _saturated_start_run(content, "local")
     assert _wrongly_white(stuck, target) > 0.1
 
 
-def test_global_parameters_keep_the_plain_clamp(content: torch.Tensor, monkeypatch) -> None:
-    import contextlib
-
-    import wise.optimize.parametric as parametric
-
+def test_global_parameters_keep_the_plain_clamp(content: torch.Tensor, monkeypatch: pytest.MonkeyPatch) -> None:
     result, _, losses = _saturated_start_run(content, "global")
-    monkeypatch.setattr(parametric, "inward_gradients", lambda enabled=True: contextlib.nullcontext())
+    _plain_clamp(monkeypatch)
     plain, _, plain_losses = _saturated_start_run(content, "global")
     assert losses == plain_losses and torch.equal(result, plain)
 
