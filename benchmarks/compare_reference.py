@@ -25,10 +25,26 @@ import wise
 from wise.io import read_image
 
 REFERENCE_PRESETS = {
-    "portrait": {"brightness": 0.1, "contrast": 1.15, "saturation": 1.02, "details": 2.27,
-                 "stroke_width": 0.54, "contour": 1.0, "blackness": 0.15, "shading": 0.0},
-    "sketch": {"brightness": 0.1, "contrast": 1.0, "saturation": 0.0, "details": 1.3,
-               "stroke_width": 0.2, "contour": 3.0, "blackness": 0.5, "shading": 0.0},
+    "portrait": {
+        "brightness": 0.1,
+        "contrast": 1.15,
+        "saturation": 1.02,
+        "details": 2.27,
+        "stroke_width": 0.54,
+        "contour": 1.0,
+        "blackness": 0.15,
+        "shading": 0.0,
+    },
+    "sketch": {
+        "brightness": 0.1,
+        "contrast": 1.0,
+        "saturation": 0.0,
+        "details": 1.3,
+        "stroke_width": 0.2,
+        "contour": 3.0,
+        "blackness": 0.5,
+        "shading": 0.0,
+    },
 }
 
 

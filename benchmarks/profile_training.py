@@ -1,19 +1,26 @@
-"""Where the time of one image-space training step goes, per effect and window size.
+"""Where the time of one training step goes, per effect and window size, and where the time
+of one effect forward and backward goes, by kind of operation.
 
 One step of ``wise train global`` with an image-space loss (``GlobalPPN._losses``, backward,
 Adam) on a batch of random windows, and its parts timed on their own with the same batch:
 
-- network: the prediction network's forward and backward (a parameter-space loss);
-- truth render: the effect on the true parameters, without autograd (the loss's reference);
+- data: rendering the batch's examples without autograd, as the data set does (redraws of
+  blank examples not counted; ``bench_examples.py`` measures the data set itself);
+- network: the prediction network's forward and backward (a parameter-space loss, whose
+  step is this and the optimizer);
 - effect forward / effect backward: the effect on the predicted parameters with autograd, and
   the backward from the loss to those parameters;
 - optimizer: one Adam step;
-- rest: the whole step minus those parts (Python, the loss, autograd bookkeeping);
+- rest: the step minus those parts (Python, the loss, autograd bookkeeping);
 - user / system: CPU seconds of the process per step (``getrusage``), over all threads.
 
-Rendering the examples themselves (the data) is measured by ``bench_training.py``.
+``--whole 256 1024`` also profiles the effect's forward and backward on one picture of each
+size with the PyTorch profiler and groups the operators' own CPU time: sampling
+(``grid_sampler_2d`` and its backward), pointwise arithmetic, exponentials and other
+transcendental functions, convolutions, reductions, copies and allocation, custom backward
+bodies (Python), and the rest.
 
-    python benchmarks/profile_training.py [--effects xdog ...] [--windows 64 128] [--batch 16]
+    python benchmarks/profile_training.py [--effects xdog ...] [--windows 64 128] [--batch 16] [--whole 256 1024]
 """
 
 from __future__ import annotations
@@ -30,7 +37,20 @@ from wise.train.losses import prediction_loss
 from wise.train.module import GlobalPPN
 
 EFFECTS = ("xdog", "cartoon", "watercolor", "oilpaint")
-PARTS = ("network", "truth render", "effect forward", "effect backward", "optimizer")
+PARTS = ("data", "network", "effect forward", "effect backward", "optimizer")
+KINDS = {
+    "sampling": ("grid_sampler",),
+    "pointwise": ("mul", "add", "sub", "div", "addcmul", "where", "neg", "rsub", "clamp", "maximum", "minimum",
+                  "abs", "sign", "lerp", "square", "pow", "sqrt", "rsqrt", "reciprocal", "hypot", "fill_", "zero_",
+                  "threshold", "relu", "gt", "lt", "ge", "le", "eq", "ne", "floor", "round", "ceil", "frac"),
+    "transcendental": ("exp", "tanh", "log", "sin", "cos", "atan2", "softplus", "sigmoid", "erf"),
+    "convolution": ("conv", "mkldnn", "linear", "addmm", "mm", "bmm", "pool"),
+    "reduction": ("sum", "mean", "max", "min", "amax", "amin", "std", "var", "norm", "argmax"),
+    "copies and allocation": ("copy_", "to_copy", "_to_copy", "empty", "zeros", "ones", "cat", "stack", "pad",
+                              "contiguous", "clone", "expand", "narrow", "slice", "select", "view", "reshape",
+                              "permute", "flip", "index", "gather", "scatter", "replication", "constant_pad"),
+}  # fmt: skip
+"""Operator kinds by the words in their names (the first kind that matches takes an operator)."""
 
 
 def best_time(fn: Callable[[], None], repeat: int) -> float:
@@ -53,6 +73,7 @@ def profile(effect: str, window: int, args: argparse.Namespace) -> dict[str, flo
         "example": torch.rand(args.batch, 3, window, window),
         "params": torch.rand(args.batch, count) - 0.5,
     }
+    batch["target"] = batch["example"]
     photo, truth = batch["photo"], batch["params"]
 
     def step() -> None:
@@ -64,7 +85,7 @@ def profile(effect: str, window: int, args: argparse.Namespace) -> dict[str, flo
         optimizer.zero_grad()
         prediction_loss("param-l1", module.network(photo, batch["example"]), truth).backward()
 
-    def truth_render() -> None:
+    def data() -> None:
         with torch.no_grad():
             module.effect(photo, truth, scale=module.scale)
 
@@ -83,16 +104,49 @@ def profile(effect: str, window: int, args: argparse.Namespace) -> dict[str, flo
     forward = best_time(effect_forward, args.repeat)
     parts = {
         "network": best_time(network, args.repeat),
-        "truth render": best_time(truth_render, args.repeat),
+        "data": best_time(data, args.repeat),
         "effect forward": forward,
         "effect backward": best_time(effect_forward_backward, args.repeat) - forward,
         "optimizer": best_time(optimizer.step, args.repeat),
     }
-    parts["rest"] = whole - sum(parts.values())
+    parts["rest"] = whole - sum(value for key, value in parts.items() if key != "data")
     parts["step"] = whole
     parts["user"] = (after.ru_utime - usage.ru_utime) / runs
     parts["system"] = (after.ru_stime - usage.ru_stime) / runs
     return parts
+
+
+def kind_of(name: str) -> str:
+    operator = name.removeprefix("aten::")
+    if not name.startswith("aten::"):
+        return "custom backward bodies" if "Backward" in name else "other"
+    for kind, words in KINDS.items():
+        if any(operator == word or operator.startswith(word) for word in words):
+            return kind
+    return "other"
+
+
+def profile_whole(effect_name: str, side: int) -> tuple[float, dict[str, float]]:
+    """Seconds of one forward and backward at ``side``², and the operators' own CPU seconds by kind."""
+    effect = effects.create(effect_name).requires_grad_(False)
+    torch.manual_seed(0)
+    image = torch.rand(1, 3, side, side)
+    params = (torch.rand(1, len(effect.param_specs)) - 0.5).requires_grad_()
+
+    def run() -> None:
+        params.grad = None
+        effect(image, params).mean().backward()
+
+    run()
+    began = time.perf_counter()
+    with torch.profiler.profile(activities=[torch.profiler.ProfilerActivity.CPU]) as profiler:
+        run()
+    seconds = time.perf_counter() - began
+    kinds: dict[str, float] = {}
+    for event in profiler.key_averages():
+        kind = kind_of(event.key)
+        kinds[kind] = kinds.get(kind, 0.0) + event.self_cpu_time_total / 1e6
+    return seconds, kinds
 
 
 def main() -> None:
@@ -103,6 +157,7 @@ def main() -> None:
     parser.add_argument("--batch", type=int, default=16)
     parser.add_argument("--architecture", default="simple")
     parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--whole", nargs="*", type=int, default=[], help="also profile whole pictures of these sides")
     args = parser.parse_args()
     print(f"threads {torch.get_num_threads()}, batch {args.batch}, {args.architecture}, windows of {args.size}")
     columns = (*PARTS, "rest")
@@ -116,6 +171,16 @@ def main() -> None:
             cpu = [f"{parts['user']:.2f} s", f"{parts['system']:.2f} s"]
             head = [effect, str(window), f"{step * 1000:.0f} ms", f"{args.batch / step:.1f}"]
             print("| " + " | ".join(head + cells + cpu) + " |", flush=True)
+    if args.whole:
+        names = (*KINDS, "custom backward bodies", "other")
+        print("\n| effect | picture | forward + backward (profiled) | " + " | ".join(names) + " |")
+        print("| --- | --- | --- |" + " --- |" * len(names))
+        for effect in args.effects:
+            for side in args.whole:
+                seconds, kinds = profile_whole(effect, side)
+                total = sum(kinds.values())
+                cells = [f"{100 * kinds.get(name, 0.0) / total:.0f} %" for name in names]
+                print(f"| {effect} | {side}² | {seconds:.2f} s | " + " | ".join(cells) + " |", flush=True)
 
 
 if __name__ == "__main__":

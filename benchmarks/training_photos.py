@@ -1,13 +1,16 @@
 """Assemble the photo folders the built-in prediction models were trained and measured on.
 
     apt-get download mate-backgrounds gnome-backgrounds ukui-wallpapers
-    python benchmarks/training_photos.py --debs . --out photos
+    apt-get download lomiri-wallpapers-16.04 lomiri-wallpapers-20.04
+    python benchmarks/training_photos.py --debs . --out photos [--portrait portrait.png]
 
 writes ``photos/train`` (the ``skimage.data`` photos listed in :data:`SKIMAGE_TRAINING`, and the
 raster pictures of the three Debian packages: mate-backgrounds, GPL-2+; gnome-backgrounds,
-CC BY-SA 3.0; ukui-wallpapers, CC BY-SA 3.0) and ``photos/eval`` (photos never used in
-training: ``skimage.data`` astronaut, chelsea and coffee, and a portrait if ``--portrait`` names
-one). Vector pictures (SVG) are left out: ``wise`` reads raster images.
+CC BY-SA 3.0; ukui-wallpapers, CC BY-SA 3.0) and ``photos/eval``, photos never used in
+training: ``skimage.data`` astronaut, chelsea and coffee; the photos of people, animals,
+objects and landscapes among the Lomiri wallpapers (:data:`LOMIRI_EVALUATION`; CC BY 4.0 and
+CC BY-SA 4.0) when those packages were downloaded; and a portrait if ``--portrait`` names one.
+Vector pictures (SVG) are left out: ``wise`` reads raster images.
 """
 
 from __future__ import annotations
@@ -33,6 +36,15 @@ PACKAGES = {
     "ukui": ("ukui-wallpapers", "usr/share/backgrounds", "*"),
 }
 RASTER = {".jpg", ".jpeg", ".png", ".webp"}
+LOMIRI = ("lomiri-wallpapers-16.04", "lomiri-wallpapers-20.04")
+LOMIRI_EVALUATION = (
+    "Bridge_by_Sander_Klootwijk", "Dragonfly_by_Bolly", "Kleiber_by_Lukas_Baubkus", "Picture_0B_by_freespace",
+    "Picture_1A_by_freespace", "Wine_by_Jakkub_Mede", "aitzgorri_by_Aitzol_Berasategi", "free_by_Peter_Nerlich",
+    "friends_by_Aitzol_Berasategi", "greentock_by_Peter_Nerlich", "life_by_Aitzol_Berasategi",
+    "picosdeeuropa_by_Aitzol_Berasategi", "seeding_by_Clements_Engelhardt", "sunset_by_Aitzol_Berasategi",
+)  # fmt: skip
+"""The photos of people, animals, objects and landscapes among the Lomiri wallpapers (the abstract
+pictures are left out), for ``eval/``: no model is trained on them."""
 
 
 def _save(name: str, folder: Path) -> None:
@@ -73,6 +85,15 @@ def main() -> None:
                     relative = path.relative_to(Path(tmp) / where)
                     (target / relative.parent).mkdir(parents=True, exist_ok=True)
                     shutil.copy(path, target / relative)
+    for package in LOMIRI:
+        debs = sorted(Path(args.debs).glob(f"{package}_*.deb"))
+        if not debs:
+            continue
+        with tempfile.TemporaryDirectory() as tmp:
+            _extract(debs[-1], Path(tmp))
+            for path in sorted((Path(tmp) / "usr/share/backgrounds").glob("*.jpg")):
+                if path.stem in LOMIRI_EVALUATION:
+                    shutil.copy(path, out / "eval" / path.name)
     count = sum(1 for p in (out / "train").rglob("*") if p.is_file())
     print(f"{out / 'train'}: {count} photos; {out / 'eval'}: {len(list((out / 'eval').iterdir()))} photos")
 

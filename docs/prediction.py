@@ -1,5 +1,6 @@
-"""The prediction sheet (docs/prediction.jpg): per effect, a photo, a stylized example of it and
-the built-in model's prediction, re-rendered.
+"""The prediction sheet (docs/prediction.jpg): per effect, a photo, a stylized example of it,
+the built-in model's prediction re-rendered, and the prediction refined as ``wise predict``
+refines it by default.
 
 Usage::
 
@@ -22,7 +23,8 @@ from skimage import data
 import wise
 from wise import metrics
 from wise.io import image_to_tensor, tensor_to_image
-from wise.predict import Predictor, at_short_side
+from wise.optimize.refine import DEFAULT_BUDGET, refine
+from wise.ppn.predictor import Predictor, at_short_side
 
 RENDER_SHORT_SIDE = 512
 CELL_HEIGHT = 200
@@ -61,17 +63,26 @@ def main() -> None:
             example = effect(photo, truth).clamp(0, 1)
             predicted = Predictor(None, effect_name)(photo, example)
             rendered = effect(photo, predicted).clamp(0, 1)
-        score = metrics.ssim(rendered, example)
-        rows.append((effect_name, [_cell(photo), _cell(example), _cell(rendered)], score))
+        refined_params = refine(effect, photo, example, predicted, DEFAULT_BUDGET).params
+        with torch.no_grad():
+            refined = effect(photo, refined_params).clamp(0, 1)
+        scores = (metrics.ssim(rendered, example), metrics.ssim(refined, example))
+        rows.append((effect_name, [_cell(photo), _cell(example), _cell(rendered), _cell(refined)], scores))
     font = ImageFont.load_default()
     width = max(sum(c.width for c in cells) + GAP * (len(cells) + 1) for _, cells, _ in rows)
     height = len(rows) * (CELL_HEIGHT + LABEL_HEIGHT + GAP) + GAP
     sheet = Image.new("RGB", (width, height), (255, 255, 255))
     draw = ImageDraw.Draw(sheet)
     top = GAP
-    for effect_name, cells, score in rows:
+    for effect_name, cells, (predicted_score, refined_score) in rows:
         left = GAP
-        for label, cell in zip(("photo", f"{effect_name} example", f"prediction (SSIM {score:.2f})"), cells):
+        labels = (
+            "photo",
+            f"{effect_name} example",
+            f"network (SSIM {predicted_score:.2f})",
+            f"refined {DEFAULT_BUDGET:g} s (SSIM {refined_score:.2f})",
+        )
+        for label, cell in zip(labels, cells):
             draw.text((left, top), label, fill=(20, 20, 20), font=font)
             sheet.paste(cell, (left, top + LABEL_HEIGHT))
             left += cell.width + GAP

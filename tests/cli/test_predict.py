@@ -21,9 +21,9 @@ import wise
 from wise import ppn
 from wise.cli import main
 from wise.io import read_image
-from wise.optimize.benchmark import content_at, random_reference
+from wise.optimize.trials import content_at, random_reference
 from wise.ppn.modelfile import ModelInfo, save_model
-from wise.predict import Predictor
+from wise.ppn.predictor import Predictor
 
 SRC = Path(wise.__file__).resolve().parent.parent
 
@@ -63,11 +63,12 @@ def test_predict_writes_parameters_that_apply_renders_to_the_same_pixels(files: 
     root = files["root"]
     code, printed = _run(
         ["predict", "cartoon", "--content", str(root / "photo.png"), "--target", str(root / "example-large.png"),
-         "-o", str(root / "out"), "--model", str(root / "cartoon-model.safetensors")]
+         "-o", str(root / "out"), "--model", str(root / "cartoon-model.safetensors"), "--refine", "0"]
     )  # fmt: skip
     assert code == 0 and "resizing the target from 320x240 to 160x120" in printed
     scores = json.loads((root / "out" / "metrics.json").read_text())
-    assert {"ssim", "psnr", "l1", "seconds", "model"} <= scores.keys() and scores["seconds"] < 1.0
+    assert {"ssim", "psnr", "l1", "seconds", "model", "network"} <= scores.keys() and scores["seconds"] < 1.0
+    assert "refinement" not in scores and not (root / "out" / "predicted.safetensors").exists()
     assert 0.0 < scores["ssim"] <= 1.0 and scores["model"].endswith("cartoon-model.safetensors")
     code, _ = _run(
         ["apply", "cartoon", str(root / "photo.png"), "-o", str(root / "applied.png"),
@@ -79,17 +80,36 @@ def test_predict_writes_parameters_that_apply_renders_to_the_same_pixels(files: 
     assert np.array_equal(result, np.asarray(Image.open(root / "applied.png")))
 
 
-def test_predict_refines_from_the_prediction(files: dict[str, Path]) -> None:
+def test_predict_refines_from_the_prediction_within_its_budget(files: dict[str, Path]) -> None:
+    root = files["root"]
+    began = time.perf_counter()
+    code, printed = _run(
+        ["predict", "cartoon", "--content", str(root / "photo.png"), "--target", str(root / "example.png"),
+         "-o", str(root / "refined"), "--model", str(root / "cartoon-model.safetensors"), "--budget", "2"]
+    )  # fmt: skip
+    elapsed = time.perf_counter() - began
+    assert code == 0 and "refined for" in printed
+    scores = json.loads((root / "refined" / "metrics.json").read_text())
+    refinement, network = scores["refinement"], scores["network"]
+    assert refinement["iterations"] > 10 and refinement["budget"] == 2.0
+    assert refinement["seconds"] <= 2.0 + 0.5, "each level stops once its share of the budget is spent"
+    assert elapsed < 2.0 + 3.0, "prediction, renders and files within seconds of the budget"
+    # the result is the better of the two
+    assert scores["ssim"] == max(refinement["ssim"], network["ssim"])
+    assert refinement["kept"] == (refinement["ssim"] >= network["ssim"])
+    for name in ("params.safetensors", "result.png", "metrics.json", "predicted.safetensors"):
+        assert (root / "refined" / name).is_file()
+
+
+def test_predict_refinement_can_be_capped_in_iterations(files: dict[str, Path]) -> None:
     root = files["root"]
     code, _ = _run(
         ["predict", "cartoon", "--content", str(root / "photo.png"), "--target", str(root / "example.png"),
-         "-o", str(root / "refined"), "--model", str(root / "cartoon-model.safetensors"), "--refine", "6"]
+         "-o", str(root / "capped"), "--model", str(root / "cartoon-model.safetensors"), "--refine", "6"]
     )  # fmt: skip
     assert code == 0
-    scores = json.loads((root / "refined" / "metrics.json").read_text())
-    assert scores["iterations"] == 6 and scores["prediction"]["ssim"] > 0 and scores["seconds"] < 1.0
-    for name in ("params.safetensors", "result.png", "report.html", "predicted.safetensors"):
-        assert (root / "refined" / name).is_file()
+    scores = json.loads((root / "capped" / "metrics.json").read_text())
+    assert scores["refinement"]["iterations"] == 6
 
 
 def test_bench_ppn_reports_means_and_trials(files: dict[str, Path]) -> None:
@@ -108,6 +128,21 @@ def test_bench_ppn_reports_means_and_trials(files: dict[str, Path]) -> None:
     for key in ("mean_ssim", "mean_psnr", "mean_param_l1", "seconds_per_prediction"):
         assert isinstance(result[key], float)
     assert result["mean_param_l1"] == pytest.approx(np.mean([row["param_l1"] for row in result["trials"]]))
+
+
+def test_bench_ppn_measures_the_refined_prediction_too(files: dict[str, Path]) -> None:
+    root = files["root"]
+    code, printed = _run(
+        ["bench", "ppn", "cartoon", "--images", str(root / "photos"),
+         "--model", str(root / "cartoon-model.safetensors"), "--trials", "2", "--size", "64",
+         "--refine", "1", "--json", str(root / "refined.json")]
+    )  # fmt: skip
+    assert code == 0 and "refined: mean SSIM" in printed
+    result = json.loads((root / "refined.json").read_text())
+    assert result["refine_budget"] == 1.0 and result["refined"]["mean_seconds"] < 3.0
+    for row in result["trials"]:
+        assert row["refined"]["ssim"] >= row["ssim"] and row["refined"]["iterations"] > 0
+    assert result["refined"]["mean_ssim"] == pytest.approx(np.mean([r["refined_ssim"] for r in result["trials"]]))
 
 
 def test_recover_starts_from_the_prediction(files: dict[str, Path]) -> None:

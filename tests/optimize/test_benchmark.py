@@ -7,7 +7,8 @@ import torch.nn.functional as F
 from wise import effects
 from wise.cli import main
 from wise.io import write_image
-from wise.optimize.benchmark import MIN_REFERENCE_CONTRAST, PSNR_CAP, random_reference, schedule
+from wise.optimize.benchmark import schedule
+from wise.optimize.trials import MIN_REFERENCE_CONTRAST, PSNR_CAP, random_reference
 
 
 def test_recover_benchmark_writes_per_trial_rows(tmp_path: Path, astronaut: torch.Tensor, capsys) -> None:

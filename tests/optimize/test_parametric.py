@@ -7,6 +7,7 @@ import torch.nn.functional as F
 import wise
 import wise.optimize.parametric as parametric
 from wise.errors import WiseError
+from wise.filters.smoothing import step_temperature
 from wise.optimize import Settings, optimize
 from wise.optimize.parametric import PYRAMIDS, optimize_coarse_to_fine, optimize_on_crops, pyramid
 
@@ -80,7 +81,8 @@ def test_interrupt_keeps_the_state_reached(content: torch.Tensor) -> None:
 
 
 def test_bad_settings_are_refused() -> None:
-    for bad in ({"mode": "x"}, {"loss": "x"}, {"iterations": 0}, {"lr": 0.0}, {"tv_weight": -1.0}, {"levels": 9}):
+    bads = ({"mode": "x"}, {"loss": "x"}, {"iterations": 0}, {"lr": 0.0}, {"tv_weight": -1.0}, {"levels": 9})
+    for bad in (*bads, {"anneal": 1.5}, {"time_limit": 0.0}):
         with pytest.raises(WiseError):
             Settings(**bad)
 
@@ -183,3 +185,30 @@ def test_crops_take_global_parameters_and_image_losses_only(content: torch.Tenso
     for settings in (Settings(mode="local", iterations=2), Settings(mode="global", iterations=2, loss="nst")):
         with pytest.raises(WiseError, match="global|l1 or l2"):
             optimize_on_crops(effect, content, content, effect.default_params(), settings)
+
+
+def test_a_time_limit_ends_the_iterations_before_it_is_spent(content: torch.Tensor) -> None:
+    effect = wise.effects.create("xdog")
+    settings = Settings(mode="global", iterations=10_000, time_limit=1.0)
+    outcome = optimize(effect, content, content, effect.default_params(), settings)
+    assert 5 < len(outcome.losses) < 10_000 and not outcome.interrupted
+    assert outcome.seconds < 1.0 + 0.5  # the last iteration starts only when it should end in time
+
+
+def test_annealing_smooths_the_first_iterations_and_ends_on_the_look_itself(
+    content: torch.Tensor, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    temperatures = []
+    effect = wise.effects.create("xdog")
+    render = effect.render
+
+    def recording(*args, **kwargs):
+        temperatures.append(step_temperature())
+        return render(*args, **kwargs)
+
+    monkeypatch.setattr(effect, "render", recording)
+    optimize(effect, content, content, effect.default_params(), Settings(mode="global", iterations=12, anneal=0.4))
+    assert temperatures[0] == 0.4 and temperatures[-1] == 0.0 and temperatures[-3:] == [0.0] * 3
+    assert all(a >= b for a, b in zip(temperatures, temperatures[1:]))
+    levels = pyramid(Settings(iterations=30, anneal=0.4))
+    assert [level.anneal for _, level in levels] == [0.4, 0.0, 0.0]

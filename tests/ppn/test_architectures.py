@@ -114,3 +114,16 @@ def test_vgg11_weights_load_and_bad_files_are_refused(tmp_path: Path) -> None:
     os.mkfifo(tmp_path / "fifo.safetensors")
     with pytest.raises(WiseError, match="not a regular file"):
         load_vgg11(target, tmp_path / "fifo.safetensors")
+
+
+def test_statsnet_predicts_the_same_for_a_window_of_a_texture_as_for_the_whole() -> None:
+    torch.manual_seed(0)
+    network = create("stats", PARAMS)
+    cell = torch.rand(1, 3, 16, 16)
+    whole, example = cell.repeat(1, 1, 8, 8), (1.0 - cell).repeat(1, 1, 8, 8)
+    with torch.no_grad():
+        on_whole = network(whole, example)
+        on_window = network(whole[..., :64, :64], example[..., :64, :64])
+        other = network(torch.rand(1, 3, 64, 64), example[..., :64, :64])
+    # the same up to the borders of the window (zero padding), unlike another picture
+    assert float((on_whole - on_window).abs().max()) < 0.3 * float((on_whole - other).abs().max())

@@ -9,7 +9,9 @@ from wise import effects
 from wise.cli import args as types
 from wise.cli.outputs import output_file
 from wise.cli.parser import add_device, add_pixel_limit, add_size, command, device, exit_code
-from wise.optimize.benchmark import INIT_PPN, parse_init, photos_in, recover
+from wise.optimize.benchmark import INIT_PPN, parse_init, recover
+from wise.optimize.refine import DEFAULT_BUDGET
+from wise.optimize.trials import photos_in
 from wise.ppn.modelfile import resolve_model
 
 IMAGE_LOSSES = ("l1", "l2")
@@ -36,6 +38,7 @@ def run_recover(args: argparse.Namespace, out: TextIO) -> int:
         json_path=args.json,
         out=out,
         init=args.init,
+        anneal=args.anneal,
     )
     return exit_code(result["interrupted"])
 
@@ -49,8 +52,9 @@ def run_ppn(args: argparse.Namespace, out: TextIO) -> int:
     inputs = {f"photo {path.name}": path for path in photos}
     output_file(args.json, {**inputs, "--model": args.model}, (".json",))
     result = bench_ppn(
-        args.effect, args.images, args.model, args.trials, args.size, args.seed, args.json, device(args.device), out
-    )
+        args.effect, args.images, args.model, args.trials, args.size, args.seed, args.json, device(args.device), out,
+        refine_budget=args.refine,
+    )  # fmt: skip
     return exit_code(result["interrupted"])
 
 
@@ -79,6 +83,13 @@ def register(commands: argparse._SubParsersAction) -> None:
         metavar="defaults|ppn[:MODEL]",
         help="start from the defaults, or from the parameters a model predicts (default: defaults)",
     )
+    recover_parser.add_argument(
+        "--anneal",
+        type=types.share,
+        default=0.0,
+        metavar="T",
+        help="smooth the look's steps at temperature T (0-1) at first, sharpening them over the coarsest level",
+    )
     add_pixel_limit(recover_parser)
     recover_parser.set_defaults(func=run_recover)
 
@@ -94,6 +105,12 @@ def register(commands: argparse._SubParsersAction) -> None:
     add_size(ppn_parser, types.working_size, "the photos")
     ppn_parser.add_argument("--seed", type=types.seed, default=0, help="seed of the random parameters")
     ppn_parser.add_argument("--json", required=True, metavar="OUT", help="write the results here (.json)")
+    ppn_parser.add_argument(
+        "--refine",
+        type=types.positive_seconds,
+        metavar="SECONDS",
+        help=f"also refine each prediction for SECONDS as 'wise predict' does (its default: {DEFAULT_BUDGET:g})",
+    )
     add_device(ppn_parser)
     add_pixel_limit(ppn_parser)
     ppn_parser.set_defaults(func=run_ppn)

@@ -18,6 +18,7 @@ from wise.cli.outputs import OutputFolder
 from wise.cli.parser import add_pixel_limit, command, exit_code
 from wise.errors import WiseError
 from wise.ppn import ARCHITECTURES
+from wise.train.data import MIXTURE_PRESET_SHARE, PROCEDURAL_SHARE, SAMPLINGS
 from wise.train.losses import LOSSES
 from wise.train.settings import TrainSettings, prepare
 
@@ -41,12 +42,14 @@ def run_train_global(args: argparse.Namespace, out: TextIO) -> int:
     for option, folder in (("--images", args.images), ("--val-images", args.val_images)):
         if folder is not None and not Path(folder).is_dir():
             raise WiseError(f"{option} {folder}: not a directory of photos")
-    if args.backbone_weights is not None and args.arch == "simple":
+    if args.backbone_weights is not None and args.arch in ("simple", "stats"):
         raise WiseError(
-            "--backbone-weights: the 'simple' architecture has no ImageNet backbone; use resnet or multifeature"
+            f"--backbone-weights: the {args.arch!r} architecture has no ImageNet backbone; use resnet or multifeature"
         )
     run_folder = OutputFolder(args.output, RUN_FILES, {"--backbone-weights": args.backbone_weights})
     if args.cache is not None:
+        if not args.fixed:
+            raise WiseError("--cache keeps a fixed set of examples; pass --fixed too, or leave --cache out")
         OutputFolder(args.cache, (), {})
     settings = TrainSettings(
         effect=args.effect,
@@ -62,6 +65,11 @@ def run_train_global(args: argparse.Namespace, out: TextIO) -> int:
         examples=args.examples,
         lr=args.lr,
         sampling=args.sampling,
+        fresh=not args.fixed,
+        procedural=args.procedural,
+        augmentation=not args.no_augment,
+        anneal=args.anneal,
+        workers=args.workers,
         val_images=args.val_images,
         accelerator=args.accelerator,
         devices=args.devices,
@@ -119,9 +127,39 @@ def register(commands: argparse._SubParsersAction) -> None:
     parser.add_argument("--lr", type=types.positive_rate, default=1e-3, help="Adam learning rate (default 0.001)")
     parser.add_argument(
         "--sampling",
-        choices=("uniform", "presets"),
+        choices=SAMPLINGS,
         default="uniform",
-        help="random parameters: uniform or near presets",
+        help=f"random parameters: uniform, near presets, or a mixture ({MIXTURE_PRESET_SHARE:.0%}% near presets)",
+    )
+    parser.add_argument(
+        "--fixed",
+        action="store_true",
+        help="train on one fixed set of --examples rendered once (default: fresh examples every epoch)",
+    )
+    parser.add_argument(
+        "--procedural",
+        type=types.share,
+        default=PROCEDURAL_SHARE,
+        metavar="SHARE",
+        help=f"share of training examples on dead-leaves pictures instead of photos (default {PROCEDURAL_SHARE})",
+    )
+    parser.add_argument(
+        "--anneal",
+        type=types.share,
+        default=0.0,
+        metavar="T",
+        help="smooth the effect's steps (XDoG threshold, quantization) at temperature T (0-1) at first, "
+        "sharpening them by the middle of the run (default 0: never)",
+    )
+    parser.add_argument(
+        "--workers",
+        type=types.whole_number(0, 64),
+        default=0,
+        metavar="N",
+        help="processes that render the examples while the steps run (default 0: the training process)",
+    )
+    parser.add_argument(
+        "--no-augment", action="store_true", help="no flips, turns or tone jitter of the training pictures"
     )
     parser.add_argument("--val-images", metavar="DIR", help="validation photos (default: 15%% of --images held out)")
     parser.add_argument("--accelerator", choices=ACCELERATORS, default="auto", help="Lightning accelerator")
@@ -139,7 +177,7 @@ def register(commands: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--cache",
         metavar="DIR",
-        help="keep the rendered examples here for later runs with the same settings and photos",
+        help="keep the rendered examples of a --fixed set here for later runs with the same settings and photos",
     )
     add_pixel_limit(parser)
     parser.set_defaults(func=run_train_global)

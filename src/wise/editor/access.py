@@ -28,7 +28,7 @@ from starlette.datastructures import Headers, MutableHeaders
 from starlette.requests import cookie_parser
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from wise.editor.server import WILDCARD_ADDRESSES
+from wise.editor.addresses import WILDCARD_ADDRESSES
 
 MAX_UPLOAD_BYTES = 64 * 1024 * 1024
 """Largest upload (an image or a parameter file)."""

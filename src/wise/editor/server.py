@@ -15,13 +15,12 @@ from pathlib import Path
 from typing import TextIO
 
 from wise import effects
+from wise.editor.addresses import LOOPBACK, WILDCARD_ADDRESSES
 from wise.editor.session import EditorSession
 from wise.errors import WiseError
 from wise.files import MAX_PARAMS_BYTES, open_regular
 from wise.io import MAX_IMAGE_BYTES
 
-LOOPBACK = "127.0.0.1"
-WILDCARD_ADDRESSES = frozenset({"0.0.0.0", "::", "[::]", ""})
 """Listen addresses that mean every interface."""
 TOKEN_BYTES = 32
 """Random bytes in an access token (43 URL-safe characters)."""

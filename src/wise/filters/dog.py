@@ -2,16 +2,24 @@
 
 from __future__ import annotations
 
+import math
+
 import torch
+import torch.nn.functional as F
 
 from wise.filters._checks import ParamLike, as_map, check_image, max_value
 from wise.filters.flow import flow_filter_inputs, pixel_step, spaced_samples, trace_streamlines
 from wise.filters.gaussian import SUPPORT, in_support
 from wise.filters.sampling import offset_grid, sample, sample_at_grid, sample_backward, sum_to, tap_sum
+from wise.filters.smoothing import step_temperature
 from wise.filters.structure import gradient_direction
 
 WIDE_TO_NARROW = 1.6
 """Ratio of the wide to the narrow Gaussian in the DoG (Winnemöller et al. 2012)."""
+SOFTENING_DECADES = 2.5
+"""The threshold's ramp is ``10 ** (SOFTENING_DECADES * t)`` times wider at step temperature ``t``."""
+CORNER_WIDTH = 0.5
+"""Width of the smooth minimum that rounds the threshold's corner at step temperature 1."""
 
 
 class _DogTaps(torch.autograd.Function):
@@ -180,6 +188,11 @@ def xdog_threshold(image: torch.Tensor, epsilon: ParamLike, sharpness: ParamLike
     """The XDoG soft threshold (Winnemöller et al. 2012): 1 above ``epsilon``,
     ``1 + tanh(sharpness * (u - epsilon))`` below it.
 
+    Under a step temperature ``t > 0`` (:func:`wise.filters.smoothing.smoothed_steps`) the
+    ramp is ``10 ** (SOFTENING_DECADES * t)`` times wider and the corner at ``epsilon`` is rounded
+    by a smooth minimum of width ``CORNER_WIDTH * t``, so that pixels far from the threshold
+    still pass gradients to ``epsilon``; at 0 it is the threshold above, exactly.
+
     Args:
         image: ``(B, C, H, W)`` DoG response.
         epsilon: threshold; float, ``(B,)`` or ``(B, 1, H, W)``.
@@ -190,5 +203,13 @@ def xdog_threshold(image: torch.Tensor, epsilon: ParamLike, sharpness: ParamLike
     """
     check_image(image)
     eps = as_map(epsilon, image, "epsilon")
+    temperature = step_temperature()
+    if temperature > 0.0:
+        phi = as_map(sharpness, image, "sharpness") * 10.0 ** (-SOFTENING_DECADES * temperature)
+        width = CORNER_WIDTH * temperature
+        # smooth minimum of 1 + tanh(z) and 1, 1 - w softplus(-tanh(z) / w), shifted by
+        # w softplus(-1 / w) so that it spans [0, 1] like the threshold
+        shift = width * math.log1p(math.exp(-1.0 / width))
+        return (1.0 + shift) - width * F.softplus(-torch.tanh(phi * (image - eps)) / width)
     ramp = 1.0 + torch.tanh(as_map(sharpness, image, "sharpness") * (image - eps))
     return torch.where(image >= eps, torch.ones_like(ramp), ramp)

@@ -14,6 +14,7 @@ import torch
 
 from wise.errors import WiseError
 from wise.filters._checks import ParamLike, as_map, check_image
+from wise.filters.smoothing import step_temperature
 
 MIN_BINS = 1.0
 """Fewest bins used; smaller values are clamped (one bin maps everything to its centre)."""
@@ -24,6 +25,9 @@ CANDIDATE_OFFSETS = (1 / 16, 1 / 8) + tuple(quarter / 4 for quarter in range(1, 
 offsets ``o`` besides ``b`` itself: up to 6 bins away in quarter steps, because a count
 scores well only within about a quarter bin of the target (every boundary ``k / b`` moves
 with it), and finer steps near ``b`` to settle on a fractional count."""
+SMOOTHED_SOFTNESS = 0.5
+"""Softness (bin widths) added to the ramps at step temperature 1: the staircase becomes a
+gentle wave whose outputs move with ``bins`` everywhere."""
 SCORE_SAMPLES = 16384
 """Pixels per image that score the candidates (a regular subsample of larger images): the
 score is a count of signs, and scoring every candidate on every pixel would cost more than
@@ -161,6 +165,8 @@ def quantize(image: torch.Tensor, bins: ParamLike, softness: ParamLike = 0.0) ->
             ``(B, 1, H, W)`` map.
         softness: >= 0: a float, ``(B,)`` tensor or ``(B, 1, H, W)`` map. A float 0 gives
             hard steps; a tensor always takes the soft path (floored at ``SOFTNESS_FLOOR``).
+            A step temperature ``t > 0`` (:func:`wise.filters.smoothing.smoothed_steps`)
+            adds ``SMOOTHED_SOFTNESS * t``.
 
     Returns:
         ``(B, C, H, W)`` quantized image.
@@ -172,8 +178,12 @@ def quantize(image: torch.Tensor, bins: ParamLike, softness: ParamLike = 0.0) ->
         raise WiseError(f"softness must be >= 0, got {softness:g}")
     bins_map = as_map(bins, image, "bins")
     detached_bins = bins_map.detach()
-    if isinstance(softness, torch.Tensor) or softness > 0.0:
-        softness_map = as_map(softness, image, "softness").clamp_min(SOFTNESS_FLOOR)
+    temperature = step_temperature()
+    if isinstance(softness, torch.Tensor) or softness > 0.0 or temperature > 0.0:
+        softness_map = as_map(softness, image, "softness")
+        if temperature > 0.0:
+            softness_map = softness_map + SMOOTHED_SOFTNESS * temperature
+        softness_map = softness_map.clamp_min(SOFTNESS_FLOOR)
         output = _levels(image, detached_bins, softness_map)
         numeric_softness = softness_map.detach()
     else:

@@ -22,6 +22,7 @@ from wise.errors import WiseError
 from wise.filters._checks import REFERENCE_SHORT_SIDE
 from wise.filters.clamp import inward_gradients
 from wise.filters.gaussian import gaussian_blur
+from wise.filters.smoothing import annealed_temperature, smoothed_steps
 from wise.params import NORMALIZED_MAX, NORMALIZED_MIN, check_params
 from wise.vgg import StyleLoss, load_vgg19
 
@@ -60,6 +61,13 @@ class Settings:
     """VGG-19 weights (safetensors) for the ``nst`` loss; default location when None."""
     levels: int = 3
     """Pyramid levels of :func:`pyramid` (1: every iteration at the working size)."""
+    time_limit: float | None = None
+    """Seconds the iterations may take (None: all of them are run): no iteration starts that
+    would end later, on the average so far; annealing then follows the time spent as well as
+    the iterations done, whichever is further along."""
+    anneal: float = 0.0
+    """Step temperature at the first iteration (0 to 1), lowered to 0 by
+    :func:`wise.filters.smoothing.annealed_temperature` (graduated non-convexity); 0: none."""
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
@@ -72,6 +80,10 @@ class Settings:
             raise WiseError(f"the learning rate must be positive, got {self.lr}")
         if self.tv_weight < 0:
             raise WiseError(f"the total-variation weight must be at least 0, got {self.tv_weight}")
+        if self.time_limit is not None and not self.time_limit > 0:
+            raise WiseError(f"the time limit must be positive, got {self.time_limit}")
+        if not 0.0 <= self.anneal <= 1.0:
+            raise WiseError(f"the annealing temperature must be from 0 to 1, got {self.anneal}")
         if self.levels not in PYRAMIDS:
             raise WiseError(f"levels must be one of {', '.join(map(str, PYRAMIDS))}, got {self.levels}")
 
@@ -120,6 +132,20 @@ def _decay_learning_rate(optimizer: torch.optim.Optimizer, iteration: int) -> No
             group["lr"] *= DECAY
 
 
+def _next_would_overrun(time_limit: float, start: float, done: int) -> bool:
+    """Whether another iteration, as long as the average so far, would end after ``time_limit``."""
+    elapsed = time.perf_counter() - start
+    return elapsed + elapsed / done > time_limit
+
+
+def _progress(settings: Settings, iteration: int, start: float) -> float:
+    """How far along the optimization is (0 to 1), by iterations and, with a time limit, by time."""
+    done = (iteration - 1) / settings.iterations
+    if settings.time_limit is None:
+        return done
+    return max(done, (time.perf_counter() - start) / settings.time_limit)
+
+
 def _finished(outcome: Outcome, effect: Effect, content: torch.Tensor, start: float) -> Outcome:
     """The outcome with its wall time and the effect's output for the parameters reached."""
     outcome.seconds = time.perf_counter() - start
@@ -157,7 +183,8 @@ def optimize(
     try:
         for iteration in range(1, settings.iterations + 1):
             optimizer.zero_grad(set_to_none=True)
-            with inward_gradients(params.dim() == 4):
+            temperature = annealed_temperature(settings.anneal, _progress(settings, iteration, start))
+            with inward_gradients(params.dim() == 4), smoothed_steps(temperature):
                 output = effect(content, params)
             loss = image_loss(output)
             if settings.tv_weight > 0 and params.dim() == 4:
@@ -174,6 +201,8 @@ def optimize(
             outcome.params = params.detach().clone()
             if on_step is not None:
                 on_step(iteration, value, output.detach())
+            if settings.time_limit is not None and _next_would_overrun(settings.time_limit, start, iteration):
+                break
     except KeyboardInterrupt:
         outcome.interrupted = True
     return _finished(outcome, effect, content, start)
@@ -194,7 +223,9 @@ def pyramid(
         count = left if last else min(left - 1, max(1, round(settings.iterations * share)))
         left -= count
         if count > 0:
-            levels.append((reduction, replace(settings, iterations=count, lr=settings.lr * rate, levels=1)))
+            anneal = settings.anneal if not levels else 0.0  # smoothing belongs to the first, coarsest level
+            level = replace(settings, iterations=count, lr=settings.lr * rate, levels=1, anneal=anneal)
+            levels.append((reduction, level))
     return tuple(levels)
 
 

@@ -3,6 +3,8 @@
 parameters in [-0.5, 0.5]. No training loop here (see :mod:`wise.train`).
 
 - :class:`SimpleNet`: three convolution stages, one linear layer.
+- :class:`StatsNet`: four convolution stages summarized by global mean and deviation, a
+  two-layer head.
 - :class:`ResNetPPN`: ResNet-50 without BatchNorm on both images concatenated, a head per parameter.
 - :class:`MultiFeaturePPN`: VGG-11 on each image, compact and Gram features of every stage, a
   head per parameter.
@@ -19,12 +21,18 @@ from wise.errors import WiseError
 from wise.ppn.multifeature import MultiFeaturePPN
 from wise.ppn.resnet import ResNetPPN
 from wise.ppn.simple import SimpleNet
+from wise.ppn.stats import StatsNet
 
-ARCHITECTURES: dict[str, type[nn.Module]] = {"simple": SimpleNet, "resnet": ResNetPPN, "multifeature": MultiFeaturePPN}
+ARCHITECTURES: dict[str, type[nn.Module]] = {
+    "simple": SimpleNet,
+    "stats": StatsNet,
+    "resnet": ResNetPPN,
+    "multifeature": MultiFeaturePPN,
+}
 
 
 def create(architecture: str, params: int) -> nn.Module:
-    """A network by name (``simple``, ``resnet``, ``multifeature``) predicting ``params`` values."""
+    """A network by name (``simple``, ``stats``, ``resnet``, ``multifeature``) predicting ``params`` values."""
     if architecture not in ARCHITECTURES:
         raise WiseError(f"unknown architecture {architecture!r}; use one of {', '.join(ARCHITECTURES)}")
     if params < 1:
@@ -32,4 +40,4 @@ def create(architecture: str, params: int) -> nn.Module:
     return ARCHITECTURES[architecture](params)
 
 
-__all__ = ["ARCHITECTURES", "MultiFeaturePPN", "ResNetPPN", "SimpleNet", "create"]
+__all__ = ["ARCHITECTURES", "MultiFeaturePPN", "ResNetPPN", "SimpleNet", "StatsNet", "create"]

@@ -10,9 +10,13 @@ from torch.utils.data import DataLoader
 
 from wise import effects, ppn
 from wise.filters._checks import REFERENCE_SHORT_SIDE
+from wise.filters.smoothing import annealed_temperature, smoothed_steps
 from wise.train.data import ExampleDataset
 from wise.train.losses import prediction_loss
 from wise.train.sampler import GlobalBatchSampler
+
+ANNEALED_SHARE = 0.5
+"""Share of a training run that keeps the effect's steps sharp at its end."""
 
 
 class GlobalPPN(L.LightningModule):
@@ -20,14 +24,20 @@ class GlobalPPN(L.LightningModule):
     :data:`wise.train.losses.LOSSES`.
 
     Image-space losses compare the effect rendered with the predicted parameters against the
-    effect rendered with the true ones, both from the photo at the network's size (the whole
-    picture ``size`` pixels), so the true parameters have zero loss. The effect always runs in
+    example's ``target``, the effect rendered with the true ones from the same photo at the
+    network's size (the whole picture ``size`` pixels) when the example was made, so the true
+    parameters have zero loss up to the target's 8-bit steps. The effect always runs in
     float32 (outside mixed precision).
+
+    ``anneal`` > 0 smooths the effect's steps in the training steps of image-space losses,
+    from that temperature down to 0 over the first half of the run (graduated non-convexity,
+    :mod:`wise.filters.smoothing`); validation always measures the look itself.
     """
 
-    def __init__(self, effect: str, architecture: str, loss: str, lr: float, size: int) -> None:
+    def __init__(self, effect: str, architecture: str, loss: str, lr: float, size: int, anneal: float = 0.0) -> None:
         super().__init__()
         self.save_hyperparameters()
+        self.anneal = anneal
         self.effect = effects.create(effect).requires_grad_(False)
         self.network = ppn.create(architecture, len(self.effect.param_specs))
         self.loss_kind, self.lr = loss, lr
@@ -41,17 +51,22 @@ class GlobalPPN(L.LightningModule):
         predicted = self.network(photo, example).float()
         with torch.autocast(self.device.type, enabled=False):
             if self.loss_kind.startswith("image"):
-                with torch.no_grad():
-                    rendered_truth = self.effect(photo, truth, scale=self.scale).clamp(0.0, 1.0)
-                loss = prediction_loss(
-                    self.loss_kind, predicted, truth, self.effect, photo, rendered_truth, scale=self.scale
-                )
+                target = batch["target"]
+                loss = prediction_loss(self.loss_kind, predicted, truth, self.effect, photo, target, scale=self.scale)
             else:
                 loss = prediction_loss(self.loss_kind, predicted, truth)
         return loss, (predicted.detach() - truth).abs().mean()
 
+    def temperature(self) -> float:
+        """The step temperature of the present training step."""
+        total = self.trainer.estimated_stepping_batches if self._trainer is not None else 0
+        if self.anneal <= 0.0 or not total or total == float("inf"):
+            return 0.0
+        return annealed_temperature(self.anneal, self.global_step / total, sharp_share=ANNEALED_SHARE)
+
     def training_step(self, batch: dict[str, torch.Tensor], batch_index: int) -> torch.Tensor:
-        loss, param_l1 = self._losses(batch)
+        with smoothed_steps(self.temperature()):
+            loss, param_l1 = self._losses(batch)
         self.log("train_loss", loss, prog_bar=True, on_step=True, on_epoch=False)
         self.log("train_param_l1", param_l1, on_step=True, on_epoch=False)
         return loss
@@ -67,20 +82,31 @@ class GlobalPPN(L.LightningModule):
 
 class ExampleData(L.LightningDataModule):
     """Training and validation examples; each process takes its share of every global batch
-    (:class:`GlobalBatchSampler`), so results do not depend on the number of processes."""
+    (:class:`GlobalBatchSampler`), so results do not depend on the number of processes.
 
-    def __init__(self, train: ExampleDataset, validation: ExampleDataset, batch: int, seed: int) -> None:
+    ``workers`` > 0 renders the batches of a fresh training stream in that many worker
+    processes while the steps run (each example is the same wherever it is rendered); a fixed
+    set and the validation set are rendered in the training process, which keeps them.
+    """
+
+    def __init__(
+        self, train: ExampleDataset, validation: ExampleDataset, batch: int, seed: int, workers: int = 0
+    ) -> None:
         super().__init__()
         self.train_set, self.validation_set, self.batch, self.seed = train, validation, batch, seed
+        self.workers = workers
 
-    def _loader(self, dataset: ExampleDataset, seed: int) -> DataLoader:
+    def _loader(self, dataset: ExampleDataset, seed: int, workers: int = 0) -> DataLoader:
         world = self.trainer.world_size if self.trainer is not None else 1
         rank = self.trainer.global_rank if self.trainer is not None else 0
         batches = min(self.batch, len(dataset) // world)
-        return DataLoader(dataset, batch_sampler=GlobalBatchSampler(len(dataset), batches, world, rank, seed))
+        sampler = GlobalBatchSampler(len(dataset), batches, world, rank, seed, fresh=dataset.fresh)
+        if workers == 0:
+            return DataLoader(dataset, batch_sampler=sampler)
+        return DataLoader(dataset, batch_sampler=sampler, num_workers=workers, persistent_workers=True)
 
     def train_dataloader(self) -> DataLoader:
-        return self._loader(self.train_set, self.seed)
+        return self._loader(self.train_set, self.seed, self.workers if self.train_set.fresh else 0)
 
     def val_dataloader(self) -> DataLoader:
         return self._loader(self.validation_set, self.seed + 1)

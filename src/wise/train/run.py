@@ -105,14 +105,14 @@ def _datasets(
 ) -> tuple[ExampleDataset, ExampleDataset]:
     """The training and validation examples (taken from the cache where it has them)."""
     training_photos, validation_photos = photos
-    common = (settings.sampling,)
+    common = {"sampling": settings.sampling, "render_size": settings.render_size, "window": settings.window}
     train_set = ExampleDataset(
-        training_photos, settings.effect, settings.size, settings.examples, *common,
-        seed=settings.seed, render_size=settings.render_size, window=settings.window,
+        training_photos, settings.effect, settings.size, settings.examples, seed=settings.seed, **common,
+        fresh=settings.fresh, procedural=settings.procedural, augmentation=settings.augmentation,
     )  # fmt: skip
     validation_set = ExampleDataset(
-        validation_photos, settings.effect, settings.size, min(VALIDATION_EXAMPLES, settings.examples), *common,
-        seed=settings.seed + 1, render_size=settings.render_size, window=settings.window,
+        validation_photos, settings.effect, settings.size, min(VALIDATION_EXAMPLES, settings.examples),
+        seed=settings.seed + 1, **common,
     )  # fmt: skip
     if settings.cache is not None:
         for dataset in (train_set, validation_set):
@@ -160,8 +160,10 @@ def train_global(
         photos = prepare(settings, folder, resume)
     L.seed_everything(settings.seed, verbose=False)
     train_set, validation_set = _datasets(settings, photos)
-    data = ExampleData(train_set, validation_set, settings.batch, settings.seed)
-    module = GlobalPPN(settings.effect, settings.architecture, settings.loss, settings.lr, settings.size)
+    data = ExampleData(train_set, validation_set, settings.batch, settings.seed, workers=settings.workers)
+    module = GlobalPPN(
+        settings.effect, settings.architecture, settings.loss, settings.lr, settings.size, anneal=settings.anneal
+    )
     if settings.backbone_weights is not None:
         _load_backbone(module.network, settings.architecture, settings.backbone_weights)
     folder.mkdir(parents=True, exist_ok=True)

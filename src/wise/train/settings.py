@@ -28,7 +28,10 @@ VALIDATION_SHARE = 0.15
 """Share of the photos held out for validation when no ``--val-images`` are given."""
 VALIDATION_EXAMPLES = 64
 PATH_SETTINGS = ("images", "val_images", "backbone_weights", "cache")
-RESUMABLE = ("effect", "architecture", "loss", "size", "render_size", "window", "batch", "examples", "sampling", "seed")
+RESUMABLE = (
+    "effect", "architecture", "loss", "size", "render_size", "window", "batch", "examples", "sampling", "seed",
+    "fresh", "procedural", "augmentation",
+)  # fmt: skip
 """Settings a resumed run must share with the run it continues."""
 
 
@@ -50,6 +53,15 @@ class TrainSettings:
     examples: int = 2000
     lr: float = 1e-3
     sampling: str = "uniform"
+    fresh: bool = False
+    """New examples every epoch instead of one fixed set of ``examples``."""
+    procedural: float = 0.0
+    """Share of the training examples on dead-leaves pictures instead of photos."""
+    augmentation: bool = False
+    anneal: float = 0.0
+    """Step temperature of the first training step, lowered to 0 by the middle of the run."""
+    workers: int = 0
+    """Processes that render the examples of a fresh stream while the steps run."""
     val_images: str | None = None
     accelerator: str = "auto"
     devices: int = 1
@@ -78,6 +90,14 @@ class TrainSettings:
             raise WiseError(f"unknown loss {self.loss!r}; use one of {', '.join(LOSSES)}")
         if self.sampling not in SAMPLINGS:
             raise WiseError(f"unknown sampling {self.sampling!r}; use one of {', '.join(SAMPLINGS)}")
+        if not 0.0 <= self.procedural <= 1.0:
+            raise WiseError(f"the procedural share must be in [0, 1], got {self.procedural}")
+        if not 0.0 <= self.anneal <= 1.0:
+            raise WiseError(f"--anneal {self.anneal} must be from 0 to 1")
+        if self.workers and not self.fresh:
+            raise WiseError("--workers renders a fresh stream; a --fixed set is rendered in the training process")
+        if self.cache is not None and self.fresh:
+            raise WiseError("a cache keeps a fixed set of examples; a fresh stream has nothing to keep")
         if self.window is not None and not 8 <= self.window <= self.size:
             raise WiseError(f"--window {self.window} must be from 8 to --size ({self.size})")
         if self.render_size < self.size:

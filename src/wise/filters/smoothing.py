@@ -1,0 +1,57 @@
+"""A temperature that smooths the step-like operations of the effects during optimization.
+
+XDoG's soft threshold and the luminance quantization are steps: away from their edges the
+image does not change when their parameters do, so a loss that compares the output with a
+distant target has no gradient with respect to ``blackness`` or ``bins``. Graduated
+non-convexity (Blake & Zisserman 1987) starts the optimization on a smoothed version of such
+steps and sharpens them as it goes. The temperature is not a parameter of the look: at 0,
+the default, every step is exactly the filter it was; optimization and training raise it
+for the forward and backward passes they run, inside :func:`smoothed_steps`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
+
+from wise.errors import WiseError
+
+_TEMPERATURE: ContextVar[float] = ContextVar("step_temperature", default=0.0)
+
+
+def step_temperature() -> float:
+    """The temperature of the steps in force here: 0 (sharp, the look itself) to 1 (smoothest)."""
+    return _TEMPERATURE.get()
+
+
+@contextmanager
+def smoothed_steps(temperature: float) -> Iterator[None]:
+    """Render with the step-like operations smoothed at ``temperature`` (0 to 1).
+
+    Stages recomputed during backward run under the context of their forward pass, so a
+    backward after the block still sees the temperature the forward pass had.
+    """
+    if not (isinstance(temperature, (int, float)) and math.isfinite(temperature) and 0.0 <= temperature <= 1.0):
+        raise WiseError(f"the step temperature must be from 0 to 1, got {temperature!r}")
+    token = _TEMPERATURE.set(float(temperature))
+    try:
+        yield
+    finally:
+        _TEMPERATURE.reset(token)
+
+
+def annealed_temperature(start: float, progress: float, sharp_share: float = 0.25) -> float:
+    """The temperature at ``progress`` (0 to 1) of a schedule from ``start`` down to 0.
+
+    It falls quadratically (most of the way early, slowly near the sharp end) and stays 0
+    for the last ``sharp_share`` of the schedule, so the result is optimized on the look itself.
+    """
+    if start <= 0.0:
+        return 0.0
+    smoothing_end = 1.0 - sharp_share
+    if progress >= smoothing_end:
+        return 0.0
+    remaining = 1.0 - max(0.0, progress) / smoothing_end
+    return start * remaining * remaining

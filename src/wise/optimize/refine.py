@@ -1,0 +1,97 @@
+"""A short optimization from predicted parameters that fits a time budget.
+
+``wise predict`` and ``wise bench ppn --refine`` continue from the network's prediction with
+this: global (or per-pixel) parameters optimized coarse to fine on copies of photo and example
+whose short sides are :data:`LEVEL_SIDES`, each level given its share of the budget, the steps
+of the look smoothed at first and sharpened as the budget runs out (graduated non-convexity,
+:mod:`wise.filters.smoothing`). A level ends when its share of the time is spent or its
+iterations are done, whichever comes first.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import replace
+
+import torch
+import torch.nn.functional as F
+
+from wise.effects.base import Effect
+from wise.errors import WiseError
+from wise.optimize.parametric import Outcome, Settings, optimize_coarse_to_fine
+
+LEVEL_SIDES = ((64, 0.35, 1.0), (128, 0.35, 0.5), (256, 0.3, 0.25))
+"""(short side in pixels, share of the budget, factor on the learning rate) per level."""
+DEFAULT_BUDGET = 8.0
+"""Seconds of refinement by default: with the interpreter's start, the prediction and the
+final rendering, ``wise predict`` then stays within about 15 s at 512 px on a 2-core CPU."""
+MAX_LEVEL_ITERATIONS = 400
+"""Iterations of a level when its time share allows more (a small picture on a fast machine)."""
+REFINE_LR = 0.05
+"""Learning rate of the coarsest level: lower than the functional benchmark's 0.1, because
+refinement starts near the answer."""
+REFINE_ANNEAL = 0.3
+"""Step temperature at the start of the coarsest level."""
+
+
+def _sides(content: torch.Tensor) -> list[tuple[int, float, float]]:
+    """The levels that are smaller than the photo, and the photo itself when it is smaller than
+    the finest level."""
+    short = min(content.shape[-2:])
+    levels = [(side, share, rate) for side, share, rate in LEVEL_SIDES if side < short]
+    if len(levels) < len(LEVEL_SIDES):
+        spare = sum(share for side, share, _ in LEVEL_SIDES if side >= short)
+        rate = LEVEL_SIDES[len(levels)][2]
+        levels.append((short, spare, rate))
+    return levels
+
+
+def refine(
+    effect: Effect,
+    content: torch.Tensor,
+    target: torch.Tensor,
+    start: torch.Tensor,
+    budget: float = DEFAULT_BUDGET,
+    mode: str = "global",
+    max_iterations: int | None = None,
+    loss: str = "l2",
+) -> Outcome:
+    """Optimize from ``start`` (normalized ``(1, P)``) for about ``budget`` seconds; returns the
+    outcome of the last level (its ``result`` at that level's size; render the parameters at
+    the photo's own size with :func:`wise.render.render`). ``max_iterations`` caps the iterations, shared out over
+    the levels (at least one each)."""
+    if not budget > 0:
+        raise WiseError(f"the refinement budget must be positive, got {budget}")
+    began = time.perf_counter()
+    plan = _sides(content)
+    per_level = MAX_LEVEL_ITERATIONS if max_iterations is None else max(1, math.ceil(max_iterations / len(plan)))
+    params = start
+    losses: list[float] = []
+    outcome: Outcome | None = None
+    for index, (side, share, rate) in enumerate(plan):
+        # the level's share of what is left, so that a level that ends early leaves its time to the next
+        left = budget - (time.perf_counter() - began)
+        if left <= 0.0:
+            break
+        settings = Settings(
+            mode=mode,
+            iterations=per_level,
+            lr=REFINE_LR * rate,
+            loss=loss,
+            levels=1,
+            time_limit=left * share / sum(s for _, s, _ in plan[index:]),
+            anneal=REFINE_ANNEAL if index == 0 else 0.0,
+        )
+        factor = side / min(content.shape[-2:])
+        size = (max(8, round(content.shape[-2] * factor)), max(8, round(content.shape[-1] * factor)))
+        small_content = F.interpolate(content, size=size, mode="area") if factor < 1 else content
+        small_target = F.interpolate(target, size=size, mode="area") if factor < 1 else target
+        outcome = optimize_coarse_to_fine(effect, small_content, small_target, params, ((1, settings),))
+        params = outcome.params
+        losses.extend(outcome.losses)
+        if outcome.interrupted:
+            break
+    if outcome is None:
+        return Outcome(params=start.detach().clone(), seconds=time.perf_counter() - began)
+    return replace(outcome, losses=losses, seconds=time.perf_counter() - began)

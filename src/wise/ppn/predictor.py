@@ -1,0 +1,43 @@
+"""A trained model ready to predict: ``Predictor(model, effect)(photo, example)``.
+
+It resizes photo and example to the model's working size before the network's one forward
+pass; the commands that predict (``wise predict``, the benchmarks) share it.
+"""
+
+from __future__ import annotations
+
+import os
+
+import torch
+import torch.nn.functional as F
+
+from wise.ppn.modelfile import load_model, resolve_model
+
+
+def at_short_side(image: torch.Tensor, short_side: int) -> torch.Tensor:
+    """``image`` resized so that its short side is ``short_side`` (area filter when reducing)."""
+    height, width = image.shape[-2:]
+    factor = short_side / min(height, width)
+    if factor == 1.0:
+        return image
+    shape = (max(1, round(height * factor)), max(1, round(width * factor)))
+    return F.interpolate(image, size=shape, mode="area" if factor < 1 else "bilinear").clamp(0.0, 1.0)
+
+
+class Predictor:
+    """A loaded model: ``predictor(photo, example)`` -> normalized global parameters ``(B, P)``."""
+
+    def __init__(self, model: str | os.PathLike[str] | None, effect: str, device: torch.device | str = "cpu") -> None:
+        path = resolve_model(model, effect)
+        self.network, self.info = load_model(path, effect)
+        self.network.to(device)
+        self.device = torch.device(device)
+        if model is None:
+            self.info.source = f"builtin:{effect}"
+
+    @torch.no_grad()
+    def __call__(self, photo: torch.Tensor, example: torch.Tensor) -> torch.Tensor:
+        size = self.info.size
+        small_photo = at_short_side(photo, size).to(self.device)
+        small_example = at_short_side(example, size).to(self.device)
+        return self.network(small_photo, small_example).float().cpu()
