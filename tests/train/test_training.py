@@ -123,3 +123,24 @@ def test_ctrl_c_saves_a_checkpoint_and_the_run_resumes(photos: Path, tmp_path: P
 
     again = subprocess.run(_wise(argv, tmp_path), capture_output=True, text=True, env=_env(), timeout=120)
     assert again.returncode == 2 and "pass --resume" in again.stderr
+
+
+def test_the_cosine_schedule_falls_to_its_floor_at_the_last_step() -> None:
+    from types import SimpleNamespace
+
+    from wise.train.module import COSINE_FLOOR, GlobalPPN
+
+    module = GlobalPPN("xdog", "simple", "image-l1", 1e-3, 32, lr_schedule="cosine")
+    module._trainer = SimpleNamespace(estimated_stepping_batches=100)  # type: ignore[assignment]
+    configured = module.configure_optimizers()
+    optimizer, schedule = configured["optimizer"], configured["lr_scheduler"]["scheduler"]
+    rates = []
+    for _ in range(100):
+        rates.append(optimizer.param_groups[0]["lr"])
+        optimizer.step()
+        schedule.step()
+    assert rates[0] == 1e-3 and rates[50] == pytest.approx(1e-3 * (1 + COSINE_FLOOR) / 2, rel=0.02)
+    assert optimizer.param_groups[0]["lr"] == pytest.approx(1e-3 * COSINE_FLOOR)
+    assert all(a >= b for a, b in zip(rates, rates[1:]))
+    constant = GlobalPPN("xdog", "simple", "image-l1", 1e-3, 32)
+    assert isinstance(constant.configure_optimizers(), torch.optim.Adam)

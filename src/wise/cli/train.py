@@ -70,6 +70,7 @@ def run_train_global(args: argparse.Namespace, out: TextIO) -> int:
         augmentation=not args.no_augment,
         anneal=args.anneal,
         workers=args.workers,
+        lr_schedule=args.lr_schedule,
         val_images=args.val_images,
         accelerator=args.accelerator,
         devices=args.devices,
@@ -125,6 +126,12 @@ def register(commands: argparse._SubParsersAction) -> None:
         "--examples", type=types.examples, default=2000, metavar="N", help="examples per epoch (default 2000)"
     )
     parser.add_argument("--lr", type=types.positive_rate, default=1e-3, help="Adam learning rate (default 0.001)")
+    parser.add_argument(
+        "--lr-schedule",
+        choices=("constant", "cosine"),
+        default="constant",
+        help="constant, or cosine: falling to 5%% of --lr at the last step (default constant)",
+    )
     parser.add_argument(
         "--sampling",
         choices=SAMPLINGS,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import lightning as L
@@ -15,6 +16,9 @@ from wise.train.data import ExampleDataset
 from wise.train.losses import prediction_loss
 from wise.train.sampler import GlobalBatchSampler
 
+LR_SCHEDULES = ("constant", "cosine")
+COSINE_FLOOR = 0.05
+"""The cosine schedule's learning rate at the end of the run, as a share of ``lr``."""
 ANNEALED_SHARE = 0.5
 """Share of a training run that keeps the effect's steps sharp at its end."""
 
@@ -34,10 +38,19 @@ class GlobalPPN(L.LightningModule):
     :mod:`wise.filters.smoothing`); validation always measures the look itself.
     """
 
-    def __init__(self, effect: str, architecture: str, loss: str, lr: float, size: int, anneal: float = 0.0) -> None:
+    def __init__(
+        self,
+        effect: str,
+        architecture: str,
+        loss: str,
+        lr: float,
+        size: int,
+        anneal: float = 0.0,
+        lr_schedule: str = "constant",
+    ) -> None:
         super().__init__()
         self.save_hyperparameters()
-        self.anneal = anneal
+        self.anneal, self.lr_schedule = anneal, lr_schedule
         self.effect = effects.create(effect).requires_grad_(False)
         self.network = ppn.create(architecture, len(self.effect.param_specs))
         self.loss_kind, self.lr = loss, lr
@@ -77,7 +90,17 @@ class GlobalPPN(L.LightningModule):
         self.log("val_param_l1", param_l1, sync_dist=True)
 
     def configure_optimizers(self) -> Any:
-        return torch.optim.Adam(self.network.parameters(), lr=self.lr)
+        optimizer = torch.optim.Adam(self.network.parameters(), lr=self.lr)
+        total = self.trainer.estimated_stepping_batches if self._trainer is not None else 0
+        if self.lr_schedule != "cosine" or not total or total == float("inf"):
+            return optimizer
+
+        def factor(step: int) -> float:
+            progress = min(1.0, step / total)
+            return COSINE_FLOOR + (1.0 - COSINE_FLOOR) * 0.5 * (1.0 + math.cos(math.pi * progress))
+
+        schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, factor)
+        return {"optimizer": optimizer, "lr_scheduler": {"scheduler": schedule, "interval": "step"}}
 
 
 class ExampleData(L.LightningDataModule):

@@ -162,7 +162,13 @@ def train_global(
     train_set, validation_set = _datasets(settings, photos)
     data = ExampleData(train_set, validation_set, settings.batch, settings.seed, workers=settings.workers)
     module = GlobalPPN(
-        settings.effect, settings.architecture, settings.loss, settings.lr, settings.size, anneal=settings.anneal
+        settings.effect,
+        settings.architecture,
+        settings.loss,
+        settings.lr,
+        settings.size,
+        anneal=settings.anneal,
+        lr_schedule=settings.lr_schedule,
     )
     if settings.backbone_weights is not None:
         _load_backbone(module.network, settings.architecture, settings.backbone_weights)

@@ -61,6 +61,8 @@ class TrainSettings:
     anneal: float = 0.0
     """Step temperature of the first training step, lowered to 0 by the middle of the run."""
     workers: int = 0
+    lr_schedule: str = "constant"
+    """``cosine``: the learning rate falls along a half cosine to 5 % of ``lr`` at the last step."""
     """Processes that render the examples of a fresh stream while the steps run."""
     val_images: str | None = None
     accelerator: str = "auto"
@@ -94,6 +96,8 @@ class TrainSettings:
             raise WiseError(f"the procedural share must be in [0, 1], got {self.procedural}")
         if not 0.0 <= self.anneal <= 1.0:
             raise WiseError(f"--anneal {self.anneal} must be from 0 to 1")
+        if self.lr_schedule not in ("constant", "cosine"):
+            raise WiseError(f"unknown learning-rate schedule {self.lr_schedule!r}; use constant or cosine")
         if self.workers and not self.fresh:
             raise WiseError("--workers renders a fresh stream; a --fixed set is rendered in the training process")
         if self.cache is not None and self.fresh:
