@@ -22,7 +22,7 @@ from wise.io.limits import (
     MAX_SAMPLES_PER_PIXEL,
     pixel_limit,
 )
-from wise.io.read import READ_FORMATS, decode_image_bytes, image_to_tensor, read_image
+from wise.io.read import IMAGE_SUFFIXES, READ_FORMATS, decode_image_bytes, image_to_tensor, read_image
 from wise.io.write import WRITE_FORMATS, atomic_path, tensor_to_image, write_image
 
 __all__ = [
@@ -30,6 +30,7 @@ __all__ = [
     "MAX_IMAGE_BYTES",
     "MAX_PIXELS_ENV",
     "MAX_SAMPLES_PER_PIXEL",
+    "IMAGE_SUFFIXES",
     "READ_FORMATS",
     "WRITE_FORMATS",
     "PathLike",

@@ -47,6 +47,8 @@ from wise.io.formats import (
 from wise.io.limits import MAX_IMAGE_BYTES, check_not_empty, check_pixels, resolve_limit
 
 READ_FORMATS = {"PNG": "PNG", "JPEG": "JPEG", "WEBP": "WebP", "TIFF": "TIFF"}
+IMAGE_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".webp", ".tif", ".tiff"})
+"""File name endings of the formats read, for commands that take a folder of images."""
 
 _WHAT = "image"
 _HEAD_BYTES = 64

@@ -21,9 +21,8 @@ import torch.nn.functional as F
 from wise.effects.base import Effect
 from wise.errors import WiseError
 from wise.interrupt import ctrl_c
-from wise.io import READ_FORMATS, atomic_path, read_image
+from wise.io import IMAGE_SUFFIXES, READ_FORMATS, atomic_path, read_image
 
-IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".webp", ".tif", ".tiff"}
 PSNR_CAP = 60.0
 """PSNR counted for a recovered image identical to the reference (beyond 8-bit precision)."""
 MIN_REFERENCE_CONTRAST = 0.05

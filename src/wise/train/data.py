@@ -32,12 +32,11 @@ from wise import effects
 from wise.errors import WiseError
 from wise.files import read_safetensors
 from wise.filters._checks import REFERENCE_SHORT_SIDE
-from wise.io import atomic_path, read_image
+from wise.io import IMAGE_SUFFIXES, atomic_path, read_image
 from wise.optimize.trials import MAX_DRAWS, MIN_REFERENCE_CONTRAST
 from wise.train.augment import augment
 from wise.train.procedural import dead_leaves
 
-IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".webp", ".tif", ".tiff"}
 MIN_PHOTOS = 4
 """Fewest readable photos a training run accepts."""
 SCALE_RANGE = (0.6, 1.0)

@@ -61,9 +61,9 @@ class TrainSettings:
     anneal: float = 0.0
     """Step temperature of the first training step, lowered to 0 by the middle of the run."""
     workers: int = 0
+    """Processes that render the examples of a fresh stream while the steps run."""
     lr_schedule: str = "constant"
     """``cosine``: the learning rate falls along a half cosine to 5 % of ``lr`` at the last step."""
-    """Processes that render the examples of a fresh stream while the steps run."""
     val_images: str | None = None
     accelerator: str = "auto"
     devices: int = 1
