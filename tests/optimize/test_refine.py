@@ -26,10 +26,10 @@ def test_refinement_moves_a_distant_start_towards_the_example_within_its_budget(
     start = effect.default_params()
     with torch.no_grad():
         before = metrics.ssim(effect(photo, start), example)
-    outcome = refine(effect, photo, example, start, budget=3.0)
+    outcome = refine(effect, photo, example, start, budget=5.0)
     with torch.no_grad():
         after = metrics.ssim(effect(photo, outcome.params), example)
-    assert outcome.seconds <= 3.0 + 0.3 and len(outcome.losses) > 20
+    assert outcome.seconds <= 5.0 + 0.3 and len(outcome.losses) > 20
     assert after > before + 0.03, (before, after)
     assert outcome.losses[-1] < outcome.losses[0]
 

@@ -21,8 +21,11 @@ from wise.effects.base import Effect
 from wise.errors import WiseError
 from wise.optimize.parametric import Outcome, Settings, optimize_coarse_to_fine
 
-LEVEL_SIDES = ((64, 0.35, 1.0), (128, 0.35, 0.5), (256, 0.3, 0.25))
-"""(short side in pixels, share of the budget, factor on the learning rate) per level."""
+LEVEL_SIDES = ((256, 0.7, 1.0), (512, 0.3, 0.5))
+"""(short side in pixels, share of the budget, factor on the learning rate) per level. No level
+below 256 pixels: an effect rendered on a small copy is another look than its large rendering
+reduced (line widths, texture scales), so coarse levels pull the parameters away from the
+answer (BENCHMARKS.md, "Refinement levels")."""
 DEFAULT_BUDGET = 8.0
 """Seconds of refinement by default: with the interpreter's start, the prediction and the
 final rendering, ``wise predict`` then stays within about 15 s at 512 px on a 2-core CPU."""
@@ -64,6 +67,9 @@ def refine(
     if not budget > 0:
         raise WiseError(f"the refinement budget must be positive, got {budget}")
     began = time.perf_counter()
+    # the first optimizer of a process imports the compiler stack (seconds): inside the budget,
+    # but before the levels share it out
+    torch.optim.Adam([torch.zeros(1, requires_grad=True)])
     plan = _sides(content)
     per_level = MAX_LEVEL_ITERATIONS if max_iterations is None else max(1, math.ceil(max_iterations / len(plan)))
     params = start
