@@ -48,7 +48,7 @@ def main() -> None:
     for name, parameter in CASES:
         effect = effects.create(name)
         index = effect.param_names.index(parameter)
-        truth = effect.default_params()
+        truth = effect.default_params().reshape(1, -1).clone()
         truth[0, index] = args.truth
         with torch.no_grad():
             targets = [effect(photo, truth) for photo in pictures]
