@@ -91,7 +91,7 @@ def test_predict_refines_from_the_prediction_within_its_budget(files: dict[str, 
     assert code == 0 and "refined for" in printed
     scores = json.loads((root / "refined" / "metrics.json").read_text())
     refinement, network = scores["refinement"], scores["network"]
-    assert refinement["iterations"] > 10 and refinement["budget"] == 4.0
+    assert refinement["iterations"] >= 5 and refinement["budget"] == 4.0
     assert refinement["seconds"] <= 4.0 + 0.5, "each level stops once its share of the budget is spent"
     assert elapsed < 4.0 + 3.0, "prediction, renders and files within seconds of the budget"
     # the result is the better of the two
