@@ -12,3 +12,53 @@ def astronaut_png(path: Path, width: int, height: int) -> Path:
     """``skimage.data.astronaut()`` resized to ``width`` x ``height``, saved as PNG at ``path``."""
     Image.fromarray(data.astronaut()).resize((width, height), Image.Resampling.BILINEAR).save(path)
     return path
+
+
+PAIR_PHOTOS = ("astronaut", "coffee", "chelsea", "rocket", "camera", "immunohistochemistry")
+"""skimage photos of the paired test sets: four for training, two for testing."""
+
+
+def xdog_pairs(root: Path, size: int = 64, parameter: str = "shading", inside: float = 0.8) -> Path:
+    """A paired set ``root/{train,test}/{A,B,regions}`` whose targets are XDoG's ``portrait``
+    preset with ``parameter`` set to ``inside`` where the photo is dark (luminance below
+    one half: the region, a rule of the pixels), and the ``task.json`` that says so."""
+    import json
+
+    import numpy as np
+    import torch
+
+    from wise import effects
+
+    effect = effects.create("xdog")
+    preset = effect.preset("portrait")
+    index = effect.param_names.index(parameter)
+    spec = effect.param_specs[index]
+    for number, name in enumerate(PAIR_PHOTOS):
+        split = "train" if number < 4 else "test"
+        for folder in ("A", "B", "regions"):
+            (root / split / folder).mkdir(parents=True, exist_ok=True)
+        picture = getattr(data, name)()
+        if picture.ndim == 2:
+            picture = np.stack([picture] * 3, axis=-1)
+        photo = Image.fromarray(picture[..., :3]).resize((size, size), Image.Resampling.BILINEAR)
+        photo.save(root / split / "A" / f"{name}.png")
+        tensor = torch.from_numpy(np.asarray(photo).copy()).permute(2, 0, 1)[None] / 255.0
+        dark = tensor.mean(dim=1, keepdim=True) < 0.5
+        masks = preset.view(1, -1, 1, 1).repeat(1, 1, size, size)
+        masks[:, index : index + 1][dark] = (inside - spec.min) / (spec.max - spec.min) - 0.5
+        region = (dark[0, 0].numpy() * 255).astype(np.uint8)
+        with torch.no_grad():
+            target = effect(tensor, masks)
+        target_array = (target[0].permute(1, 2, 0).numpy() * 255.0).round().astype(np.uint8)
+        Image.fromarray(target_array).save(root / split / "B" / f"{name}.png")
+        Image.fromarray(region).save(root / split / "regions" / f"{name}.png")
+    task = {
+        "task": "dark",
+        "effect": "xdog",
+        "preset": "portrait",
+        "parameter": parameter,
+        "inside": inside,
+        "preset_value": effect.presets["portrait"][parameter],
+    }
+    (root / "task.json").write_text(json.dumps(task))
+    return root

@@ -1,8 +1,9 @@
-"""Global parameters predicted from a photo and a stylized example of it (``wise predict``).
+"""Parameters predicted by a trained network (``wise predict``).
 
-A trained network (:class:`wise.ppn.predictor.Predictor`) predicts the parameters in one
-forward pass; a short optimization within a time budget refines them
-(:mod:`wise.optimize.refine`) unless asked not to.
+A global model (:class:`wise.ppn.predictor.Predictor`) predicts the global parameters that
+re-create a stylized example of a photo in one forward pass; a short optimization within a
+time budget refines them (:mod:`wise.optimize.refine`) unless asked not to. A local model
+(:class:`wise.ppn.predictor.LocalPredictor`) paints the parameter masks from the photo alone.
 """
 
 from __future__ import annotations
@@ -19,12 +20,15 @@ from wise import effects, metrics
 from wise.effects.base import Effect
 from wise.io import atomic_path, read_image, write_image
 from wise.optimize.refine import DEFAULT_BUDGET, refine
+from wise.optimize.report import mask_sheet
 from wise.optimize.run import match_target
 from wise.paramfile import save_params
-from wise.ppn.predictor import Predictor
+from wise.ppn.predictor import LocalPredictor, Predictor
 from wise.render import render
 
 RESULT_FILES = ("params.safetensors", "result.png", "metrics.json")
+MASKS_FILE = "masks.png"
+"""A local model's masks, each as a heat map over its parameter's range."""
 PREDICTED_FILE = "predicted.safetensors"
 """With refinement: the network's own prediction, which the refinement started from."""
 
@@ -117,6 +121,51 @@ def predict_files(
     print(
         f"predicted in {seconds:.2f} s with {predictor.info.source}{how}: ssim {scores['ssim']:.4f}  "
         f"psnr {scores['psnr']:.2f} dB  l1 {scores['l1']:.4f}; result: {folder / 'result.png'}",
+        file=out,
+    )
+    return scores
+
+
+def predict_local_files(
+    effect_name: str,
+    content_path: str,
+    out_dir: str,
+    model: str,
+    device: torch.device | str = "cpu",
+    out: TextIO = sys.stdout,
+) -> dict:
+    """Paint the parameter masks of the content with a local model, render the content with
+    them at full resolution, and write :data:`RESULT_FILES` and :data:`MASKS_FILE` into
+    ``out_dir`` (the masks at the model's working size: ``wise apply --params`` and the
+    editor enlarge them to any picture). Returns the metrics."""
+    effect = effects.create(effect_name)
+    predictor = LocalPredictor(model, effect_name, device)
+    content = read_image(content_path)
+    began = time.perf_counter()
+    masks = predictor(content)
+    seconds = time.perf_counter() - began
+    result = render(effect, content, masks)
+    real = effect.params_to_dict(masks.mean(dim=(2, 3))[0])
+    scores = {
+        "effect": effect.name,
+        "model": predictor.info.source,
+        "kind": "local",
+        "architecture": predictor.info.architecture,
+        "working_size": predictor.info.size,
+        "masks_size": list(masks.shape[-2:]),
+        "seconds": round(seconds, 4),
+        "mean_params": real,
+    }
+    folder = Path(out_dir)
+    folder.mkdir(parents=True, exist_ok=True)
+    save_params(folder / RESULT_FILES[0], effect, masks)
+    write_image(result, folder / RESULT_FILES[1])
+    with atomic_path(folder / MASKS_FILE) as tmp:
+        mask_sheet(masks, effect.param_specs).save(tmp, format="PNG")
+    _write_json(folder / RESULT_FILES[2], scores)
+    print(
+        f"masks painted in {seconds:.2f} s with {predictor.info.source}; result: {folder / RESULT_FILES[1]}; "
+        f"masks: {folder / MASKS_FILE}",
         file=out,
     )
     return scores

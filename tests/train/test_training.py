@@ -128,7 +128,8 @@ def test_ctrl_c_saves_a_checkpoint_and_the_run_resumes(photos: Path, tmp_path: P
 def test_the_cosine_schedule_falls_to_its_floor_at_the_last_step() -> None:
     from types import SimpleNamespace
 
-    from wise.train.module import COSINE_FLOOR, GlobalPPN
+    from wise.train.module import GlobalPPN
+    from wise.train.schedules import COSINE_FLOOR
 
     module = GlobalPPN("xdog", "simple", "image-l1", 1e-3, 32, lr_schedule="cosine")
     module._trainer = SimpleNamespace(estimated_stepping_batches=100)  # type: ignore[assignment]

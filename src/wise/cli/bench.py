@@ -1,4 +1,5 @@
-"""``wise bench``: benchmarks (``recover``: the functional benchmark of the supplement)."""
+"""``wise bench``: benchmarks (``recover``: the functional benchmark of the supplement;
+``ppn``: global prediction; ``pairs``: local models on paired images)."""
 
 from __future__ import annotations
 
@@ -9,10 +10,13 @@ from wise import effects
 from wise.cli import args as types
 from wise.cli.outputs import output_file
 from wise.cli.parser import add_device, add_pixel_limit, add_size, command, device, exit_code
+from wise.errors import WiseError
 from wise.optimize.benchmark import INIT_PPN, parse_init, recover
 from wise.optimize.refine import DEFAULT_BUDGET
 from wise.optimize.trials import photos_in
-from wise.ppn.modelfile import resolve_model
+from wise.ppn.modelfile import model_info, resolve_model
+from wise.train.evaluate import bench_folder, bench_pairs, read_pairs
+from wise.train.local_settings import read_task
 
 IMAGE_LOSSES = ("l1", "l2")
 """The losses the crop iterations take."""
@@ -22,7 +26,7 @@ def run_recover(args: argparse.Namespace, out: TextIO) -> int:
     effects.create(args.effect)
     init_kind, model = parse_init(args.init)
     if init_kind == INIT_PPN:
-        resolve_model(model, args.effect)
+        resolve_model(model, args.effect, "global")
     photos = photos_in(args.images)
     inputs = {f"photo {path.name}": path for path in photos}
     output_file(args.json, {**inputs, "--init": model}, (".json",))
@@ -47,7 +51,7 @@ def run_ppn(args: argparse.Namespace, out: TextIO) -> int:
     from wise.optimize.ppn_benchmark import bench_ppn
 
     effects.create(args.effect)
-    resolve_model(args.model, args.effect)
+    resolve_model(args.model, args.effect, "global")
     photos = photos_in(args.images)
     inputs = {f"photo {path.name}": path for path in photos}
     output_file(args.json, {**inputs, "--model": args.model}, (".json",))
@@ -55,6 +59,28 @@ def run_ppn(args: argparse.Namespace, out: TextIO) -> int:
         args.effect, args.images, args.model, args.trials, args.size, args.seed, args.json, device(args.device), out,
         refine_budget=args.refine,
     )  # fmt: skip
+    return exit_code(result["interrupted"])
+
+
+def _pairs_effect(args: argparse.Namespace) -> str:
+    """The effect of ``--model``: named by the file, else by ``--effect`` or the pairs' task."""
+    if args.effect is not None:
+        return effects.create(args.effect).name
+    if not str(args.model).startswith("builtin:"):
+        return model_info(args.model).effect
+    task_effect = read_task(bench_folder(args.pairs).parent).get("effect") or read_task(args.pairs).get("effect")
+    if task_effect is None:
+        raise WiseError(f"--model {args.model}: name the effect of the built-in model with --effect")
+    return str(task_effect)
+
+
+def run_pairs(args: argparse.Namespace, out: TextIO) -> int:
+    effect = _pairs_effect(args)
+    path = resolve_model(args.model, effect, "local")
+    pairs, _ = read_pairs(args.pairs)
+    inputs = {f"pair {pair.name}": pair.photo for pair in pairs}
+    output_file(args.json, {**inputs, "--model": path}, (".json",))
+    result = bench_pairs(args.model, effect, args.pairs, args.json, device(args.device), out)
     return exit_code(result["interrupted"])
 
 
@@ -114,3 +140,21 @@ def register(commands: argparse._SubParsersAction) -> None:
     add_device(ppn_parser)
     add_pixel_limit(ppn_parser)
     ppn_parser.set_defaults(func=run_ppn)
+
+    pairs_parser = command(benches, "pairs", "measure a local model on paired images against their targets")
+    pairs_parser.add_argument(
+        "--model", required=True, metavar="FILE", help="a model of 'wise train local', or builtin:TASK"
+    )
+    pairs_parser.add_argument(
+        "--pairs",
+        required=True,
+        metavar="DIR",
+        help="a folder with A/ and B/ (and regions/ for adaptive tasks), or a pairs folder (its test/ is measured)",
+    )
+    pairs_parser.add_argument("--json", required=True, metavar="OUT", help="write the results here (.json)")
+    pairs_parser.add_argument(
+        "--effect", help="the effect of a built-in model (default: the pairs' task's); a model file names its own"
+    )
+    add_device(pairs_parser)
+    add_pixel_limit(pairs_parser)
+    pairs_parser.set_defaults(func=run_pairs)

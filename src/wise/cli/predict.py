@@ -1,5 +1,5 @@
-"""``wise predict``: global parameters from a photo and an example: a network's prediction,
-refined within a time budget."""
+"""``wise predict``: global parameters from a photo and an example (a network's prediction,
+refined within a time budget), or parameter masks from the photo alone (a local model)."""
 
 from __future__ import annotations
 
@@ -10,17 +10,31 @@ from wise import effects
 from wise.cli import args as types
 from wise.cli.outputs import OutputFolder
 from wise.cli.parser import add_device, add_pixel_limit, command, device, exit_code
+from wise.errors import WiseError
 from wise.optimize.parametric import MODES
 from wise.optimize.refine import DEFAULT_BUDGET
-from wise.ppn.modelfile import resolve_model
-from wise.predict import PREDICTED_FILE, RESULT_FILES, predict_files
+from wise.ppn.modelfile import model_info, model_path
+from wise.predict import MASKS_FILE, PREDICTED_FILE, RESULT_FILES, predict_files, predict_local_files
 
 
 def run_predict(args: argparse.Namespace, out: TextIO) -> int:
     effects.create(args.effect)
-    resolve_model(args.model, args.effect)
+    path = model_path(args.model, args.effect)
+    kind = model_info(path, args.effect).kind
+    model = None if args.model is None else str(path)
+    if kind == "local":
+        if args.target is not None:
+            raise WiseError(f"{args.model}: a local model paints the masks from the photo alone; leave out --target")
+        folder = OutputFolder(args.output, (*RESULT_FILES, MASKS_FILE), {"--content": args.content, "--model": model})
+        with folder.guard():
+            scores = predict_local_files(
+                args.effect, args.content, args.output, args.model, device=device(args.device), out=out
+            )
+        return exit_code(bool(scores.get("interrupted")))
+    if args.target is None:
+        raise WiseError("--target is required: a global model re-creates a stylized example of the photo")
     files = (*RESULT_FILES, PREDICTED_FILE)
-    inputs = {"--content": args.content, "--target": args.target, "--model": args.model}
+    inputs = {"--content": args.content, "--target": args.target, "--model": model}
     folder = OutputFolder(args.output, files, inputs)
     with folder.guard():
         scores = predict_files(
@@ -39,12 +53,23 @@ def run_predict(args: argparse.Namespace, out: TextIO) -> int:
 
 
 def register(commands: argparse._SubParsersAction) -> None:
-    parser = command(commands, "predict", "predict the global parameters that re-create an example")
+    parser = command(
+        commands,
+        "predict",
+        "predict the global parameters that re-create an example, or paint parameter masks with a local model",
+    )
     parser.add_argument("effect", metavar="EFFECT", help="effect name (see 'wise effects')")
     parser.add_argument("--content", required=True, metavar="IMAGE", help="the photo")
-    parser.add_argument("--target", required=True, metavar="IMAGE", help="the stylized example of it")
+    parser.add_argument(
+        "--target", metavar="IMAGE", help="the stylized example of it (global models; a local model takes none)"
+    )
     parser.add_argument("-o", "--output", required=True, metavar="OUTDIR", help="folder for the results")
-    parser.add_argument("--model", metavar="FILE", help="a model of 'wise train global' (default: the built-in one)")
+    parser.add_argument(
+        "--model",
+        metavar="FILE",
+        help="a model of 'wise train global' or 'wise train local', or builtin:TASK for a built-in local model "
+        "(default: the built-in global model)",
+    )
     parser.add_argument(
         "--budget",
         type=types.positive_seconds,

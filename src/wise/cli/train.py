@@ -1,4 +1,5 @@
 """``wise train global``: train a global parameter prediction network on a folder of photos.
+``wise train local``: train a local one (parameter masks from the photo) on paired images.
 
 Lightning is imported only when a run starts, so other commands start quickly.
 """
@@ -19,7 +20,10 @@ from wise.cli.parser import add_pixel_limit, command, exit_code
 from wise.errors import WiseError
 from wise.ppn import ARCHITECTURES
 from wise.train.data import MIXTURE_PRESET_SHARE, PROCEDURAL_SHARE, SAMPLINGS
+from wise.train.discriminator import GAN_LOSSES
+from wise.train.local_settings import DIRECTIONS, LocalSettings, prepare_local
 from wise.train.losses import LOSSES
+from wise.train.schedules import LR_SCHEDULES
 from wise.train.settings import TrainSettings, prepare
 
 ACCELERATORS = ("auto", "cpu", "gpu", "cuda", "mps")
@@ -34,6 +38,12 @@ def _check_accelerator(name: str) -> None:
         raise WiseError(f"--accelerator {name}: CUDA is not available here; use --accelerator cpu")
     if name == "mps" and not torch.backends.mps.is_available():
         raise WiseError("--accelerator mps: MPS is not available here; use --accelerator cpu")
+
+
+def _engine_settings(args: argparse.Namespace) -> dict:
+    """The settings of the options both kinds of training share (:func:`_add_engine`, ``--anneal``)."""
+    names = ("anneal", "workers", "accelerator", "devices", "num_nodes", "seed", "half", "checkpoint_every")
+    return {name: getattr(args, name) for name in names}
 
 
 def run_train_global(args: argparse.Namespace, out: TextIO) -> int:
@@ -68,32 +78,175 @@ def run_train_global(args: argparse.Namespace, out: TextIO) -> int:
         fresh=not args.fixed,
         procedural=args.procedural,
         augmentation=not args.no_augment,
-        anneal=args.anneal,
-        workers=args.workers,
         lr_schedule=args.lr_schedule,
         val_images=args.val_images,
-        accelerator=args.accelerator,
-        devices=args.devices,
-        num_nodes=args.num_nodes,
-        seed=args.seed,
-        half=args.half,
-        checkpoint_every=args.checkpoint_every,
         backbone_weights=args.backbone_weights,
         cache=args.cache,
+        **_engine_settings(args),
     )
     photos = prepare(settings, Path(args.output), args.resume)
     from wise.train.run import train_global  # Lightning
 
-    for name in ("lightning.pytorch", "lightning.fabric"):
-        logging.getLogger(name).setLevel(logging.WARNING)
+    _quiet_lightning()
     with run_folder.guard():
         summary = train_global(settings, args.output, resume=args.resume, out=out, photos=photos)
     return exit_code(summary["interrupted"])
 
 
+def _quiet_lightning() -> None:
+    for name in ("lightning.pytorch", "lightning.fabric"):
+        logging.getLogger(name).setLevel(logging.WARNING)
+
+
+def run_train_local(args: argparse.Namespace, out: TextIO) -> int:
+    effects.create(args.effect)
+    _check_accelerator(args.accelerator)
+    if not Path(args.pairs).is_dir():
+        raise WiseError(f"--pairs {args.pairs}: not a directory of pairs (train/ and test/)")
+    run_folder = OutputFolder(args.output, RUN_FILES, {})
+    settings = LocalSettings(
+        effect=args.effect,
+        pairs=args.pairs,
+        start=args.start,
+        depth=args.depth,
+        width=args.width,
+        max_width=args.max_width,
+        discriminator_width=args.discriminator_width,
+        gan_loss=args.gan_loss,
+        gan_weight=args.gan_weight,
+        l1_weight=args.l1_weight,
+        tv_weight=args.tv_weight,
+        lr=args.lr,
+        lr_schedule=args.lr_schedule,
+        batch=args.batch,
+        steps=None if args.epochs is not None else (args.steps or DEFAULT_STEPS),
+        epochs=args.epochs,
+        load_size=args.load_size,
+        crop_size=args.crop_size,
+        flip=not args.no_flip,
+        direction=args.direction,
+        **_engine_settings(args),
+    )
+    pairs = prepare_local(settings, Path(args.output), args.resume)
+    from wise.train.local_run import train_local  # Lightning
+
+    _quiet_lightning()
+    with run_folder.guard():
+        summary = train_local(settings, args.output, resume=args.resume, out=out, pairs=pairs)
+    return exit_code(summary["interrupted"])
+
+
+def _add_length(parser: argparse.ArgumentParser) -> None:
+    length = parser.add_mutually_exclusive_group()
+    length.add_argument("--steps", type=types.iterations, metavar="N", help=f"training steps (default {DEFAULT_STEPS})")
+    length.add_argument("--epochs", type=types.iterations, metavar="N", help="passes over the training data instead")
+
+
+def _add_engine(parser: argparse.ArgumentParser) -> None:
+    """Where and how a run trains, and how it is resumed: the options both kinds share."""
+    parser.add_argument("--accelerator", choices=ACCELERATORS, default="auto", help="Lightning accelerator")
+    parser.add_argument("--devices", type=types.processes, default=1, metavar="N", help="devices (processes) per node")
+    parser.add_argument("--num-nodes", type=types.processes, default=1, metavar="N", help="nodes (default 1)")
+    parser.add_argument("--resume", action="store_true", help="continue the run in RUNDIR from its checkpoint")
+    parser.add_argument(
+        "--seed", type=types.training_seed, default=0, help="seed of the data and weights, 0 to 2**32-1"
+    )
+    parser.add_argument("--half", action="store_true", help="store the model's weights as float16")
+    parser.add_argument(
+        "--checkpoint-every", type=types.iterations, default=200, metavar="N", help="steps between checkpoints (200)"
+    )
+    parser.add_argument(
+        "--workers",
+        type=types.whole_number(0, 64),
+        default=0,
+        metavar="N",
+        help="processes that prepare the training data while the steps run (default 0: the training process)",
+    )
+
+
+def _add_anneal(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--anneal",
+        type=types.share,
+        default=0.0,
+        metavar="T",
+        help="smooth the effect's steps (XDoG threshold, quantization) at temperature T (0-1) at first, "
+        "sharpening them by the middle of the run (default 0: never)",
+    )
+
+
+def _register_local(kinds: argparse._SubParsersAction) -> None:
+    parser = command(
+        kinds, "local", "train a network that paints an effect's parameter masks from the photo (paired images)"
+    )
+    parser.add_argument("effect", metavar="EFFECT", help="effect name (see 'wise effects')")
+    parser.add_argument(
+        "--pairs",
+        required=True,
+        metavar="DIR",
+        help="paired images: DIR/train and DIR/test, each with A/ (photos) and B/ (targets) or side-by-side AB images",
+    )
+    parser.add_argument("-o", "--output", required=True, metavar="RUNDIR", help="folder of the run")
+    parser.add_argument(
+        "--start", metavar="PRESET", help="preset the untrained network paints (default: the pairs' task preset)"
+    )
+    network = parser.add_argument_group("networks")
+    network.add_argument("--depth", type=types.whole_number(2, 9), default=6, help="U-Net levels (default 6)")
+    network.add_argument(
+        "--width", type=types.whole_number(1, 512), default=16, help="channels of its first level (16)"
+    )
+    network.add_argument(
+        "--max-width", type=types.whole_number(1, 1024), default=64, help="most channels of a level (64)"
+    )
+    network.add_argument(
+        "--discriminator-width",
+        type=types.whole_number(1, 512),
+        default=64,
+        metavar="N",
+        help="channels of the PatchGAN's first layer (pix2pix: 64)",
+    )
+    losses = parser.add_argument_group("loss: α·GAN + β·L1 + γ·TV(masks)")
+    losses.add_argument("--gan-loss", choices=GAN_LOSSES, default="vanilla", help="GAN loss (default vanilla)")
+    losses.add_argument(
+        "--gan-weight", type=types.weight, default=1.0, metavar="α", help="0 trains without a discriminator (1)"
+    )
+    losses.add_argument("--l1-weight", type=types.weight, default=100.0, metavar="β", help="L1 to the targets (100)")
+    losses.add_argument(
+        "--tv-weight", type=types.weight, default=1.0, metavar="γ", help="total variation of the masks (1)"
+    )
+    parser.add_argument("--lr", type=types.positive_rate, default=2e-4, help="Adam learning rate (default 0.0002)")
+    parser.add_argument(
+        "--lr-schedule",
+        choices=LR_SCHEDULES,
+        default="linear",
+        help="linear: constant, then falling to 0 over the second half (pix2pix; default); constant; cosine",
+    )
+    parser.add_argument("--batch", type=types.batch, default=1, metavar="B", help="pairs per step and process (1)")
+    _add_length(parser)
+    parser.add_argument(
+        "--load-size",
+        type=types.working_size,
+        default=286,
+        metavar="PX",
+        help="short side the pairs are resized to before cropping (default 286)",
+    )
+    parser.add_argument(
+        "--crop-size", type=types.working_size, default=256, metavar="PX", help="side of the random crops (256)"
+    )
+    parser.add_argument("--no-flip", action="store_true", help="no random horizontal flips")
+    parser.add_argument(
+        "--direction", choices=DIRECTIONS, default="AtoB", help="AtoB: A is the photo (default); BtoA swaps"
+    )
+    _add_anneal(parser)
+    _add_engine(parser)
+    add_pixel_limit(parser)
+    parser.set_defaults(func=run_train_local)
+
+
 def register(commands: argparse._SubParsersAction) -> None:
     train = command(commands, "train", "train parameter prediction networks", writes=False)
     kinds = train.add_subparsers(dest="kind", metavar="KIND", required=True, parser_class=type(train))
+    _register_local(kinds)
     parser = command(kinds, "global", "train a network that predicts an effect's global parameters from an example")
     parser.add_argument("effect", metavar="EFFECT", help="effect name (see 'wise effects')")
     parser.add_argument(
@@ -119,9 +272,7 @@ def register(commands: argparse._SubParsersAction) -> None:
         help=f"side of the training windows at --size (default {DEFAULT_WINDOW}; rendering costs its square)",
     )
     parser.add_argument("--batch", type=types.batch, default=16, metavar="B", help="examples per step and process (16)")
-    length = parser.add_mutually_exclusive_group()
-    length.add_argument("--steps", type=types.iterations, metavar="N", help=f"training steps (default {DEFAULT_STEPS})")
-    length.add_argument("--epochs", type=types.iterations, metavar="N", help="passes over the examples instead")
+    _add_length(parser)
     parser.add_argument(
         "--examples", type=types.examples, default=2000, metavar="N", help="examples per epoch (default 2000)"
     )
@@ -150,36 +301,12 @@ def register(commands: argparse._SubParsersAction) -> None:
         metavar="SHARE",
         help=f"share of training examples on dead-leaves pictures instead of photos (default {PROCEDURAL_SHARE})",
     )
-    parser.add_argument(
-        "--anneal",
-        type=types.share,
-        default=0.0,
-        metavar="T",
-        help="smooth the effect's steps (XDoG threshold, quantization) at temperature T (0-1) at first, "
-        "sharpening them by the middle of the run (default 0: never)",
-    )
-    parser.add_argument(
-        "--workers",
-        type=types.whole_number(0, 64),
-        default=0,
-        metavar="N",
-        help="processes that render the examples while the steps run (default 0: the training process)",
-    )
+    _add_anneal(parser)
     parser.add_argument(
         "--no-augment", action="store_true", help="no flips, turns or tone jitter of the training pictures"
     )
     parser.add_argument("--val-images", metavar="DIR", help="validation photos (default: 15%% of --images held out)")
-    parser.add_argument("--accelerator", choices=ACCELERATORS, default="auto", help="Lightning accelerator")
-    parser.add_argument("--devices", type=types.processes, default=1, metavar="N", help="devices (processes) per node")
-    parser.add_argument("--num-nodes", type=types.processes, default=1, metavar="N", help="nodes (default 1)")
-    parser.add_argument("--resume", action="store_true", help="continue the run in RUNDIR from its checkpoint")
-    parser.add_argument(
-        "--seed", type=types.training_seed, default=0, help="seed of the data and weights, 0 to 2**32-1"
-    )
-    parser.add_argument("--half", action="store_true", help="store the model's weights as float16")
-    parser.add_argument(
-        "--checkpoint-every", type=types.iterations, default=200, metavar="N", help="steps between checkpoints (200)"
-    )
+    _add_engine(parser)
     parser.add_argument("--backbone-weights", metavar="FILE", help="ImageNet weights of the backbone (safetensors)")
     parser.add_argument(
         "--cache",

@@ -46,6 +46,9 @@ class Effect(nn.Module):
     name: ClassVar[str]
     param_specs: ClassVar[tuple[ParamSpec, ...]]
     presets: ClassVar[Mapping[str, Mapping[str, float]]] = {}
+    position_dependent: ClassVar[bool] = False
+    """Whether the look depends on where a tile sits in the picture (textures fixed to the
+    paper), so that tiles with other origins must be rendered apart."""
 
     def __init__(self, kernel_size: int = 3, checkpoint: bool = False) -> None:
         super().__init__()

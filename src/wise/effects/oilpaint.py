@@ -95,6 +95,7 @@ class OilPaint(Effect):
     """
 
     name = "oilpaint"
+    position_dependent = True
     param_specs = (
         ParamSpec("brightness", -0.2, 0.3, 0.0, "added to the input colours"),
         ParamSpec("contrast", 0.5, 2.0, 1.1, "contrast of the input around mid-grey"),

@@ -93,6 +93,7 @@ class Watercolor(Effect):
     """
 
     name = "watercolor"
+    position_dependent = True
     param_specs = (
         ParamSpec("brightness", -0.2, 0.3, 0.05, "added to the input colours"),
         ParamSpec("contrast", 0.5, 2.0, 1.0, "contrast of the input around mid-grey"),

@@ -16,7 +16,7 @@ from typing import Mapping, Protocol, Sequence
 
 import numpy as np
 import torch
-from PIL import Image
+from PIL import Image, ImageDraw
 
 from wise import params as P
 from wise.io import PathLike, atomic_path, tensor_to_image
@@ -74,6 +74,33 @@ def heatmap(values: np.ndarray | torch.Tensor, low: float, high: float) -> np.nd
     frac = (position - index)[..., None]
     colours = VIRIDIS_STOPS[index] * (1.0 - frac) + VIRIDIS_STOPS[index + 1] * frac
     return np.round(colours).astype(np.uint8)
+
+
+SHEET_COLUMNS = 4
+SHEET_LABEL_HEIGHT = 14
+SHEET_GAP = 4
+
+
+def mask_sheet(params: torch.Tensor, specs: Sequence[ParamSpec], side: int = HEATMAP_SIDE) -> Image.Image:
+    """Every mask of normalized ``(1, P, h, w)`` parameters as a heat map over its parameter's
+    range, labelled with its name and range, in rows of four on white."""
+    if params.dim() != 4 or params.shape[:2] != (1, len(specs)):
+        raise ValueError(f"mask_sheet needs (1, {len(specs)}, h, w) masks, got {tuple(params.shape)}")
+    real = P.to_real(params.detach().to("cpu", torch.float64), specs)[0]
+    height, width = real.shape[-2:]
+    scale = side / max(height, width)
+    cell = (max(1, round(width * scale)), max(1, round(height * scale)))
+    columns = min(SHEET_COLUMNS, len(specs))
+    rows = math.ceil(len(specs) / columns)
+    pitch = (cell[0] + SHEET_GAP, cell[1] + SHEET_LABEL_HEIGHT + SHEET_GAP)
+    sheet = Image.new("RGB", (columns * pitch[0], rows * pitch[1]), "white")
+    draw = ImageDraw.Draw(sheet)
+    for index, (spec, mask) in enumerate(zip(specs, real)):
+        left, top = (index % columns) * pitch[0], (index // columns) * pitch[1]
+        draw.text((left, top), f"{spec.name} [{_num(spec.min)}, {_num(spec.max)}]", fill="black")
+        tile = Image.fromarray(heatmap(mask, spec.min, spec.max)).resize(cell, Image.Resampling.BILINEAR)
+        sheet.paste(tile, (left, top + SHEET_LABEL_HEIGHT))
+    return sheet
 
 
 def fit_image(image: Image.Image, max_side: int, resample: Image.Resampling = Image.Resampling.LANCZOS) -> Image.Image:

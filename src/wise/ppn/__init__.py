@@ -9,6 +9,11 @@ parameters in [-0.5, 0.5]. No training loop here (see :mod:`wise.train`).
 - :class:`MultiFeaturePPN`: VGG-11 on each image, compact and Gram features of every stage, a
   head per parameter.
 
+Local networks paint a mask per parameter from the photo alone (Sec. 4.1, "Local Parameter
+Prediction"):
+
+- :class:`LocalPPN`: a U-Net.
+
 Backbones start from random weights or from ImageNet weights the user provides
 (:mod:`wise.ppn.weights`).
 """
@@ -22,6 +27,7 @@ from wise.ppn.multifeature import MultiFeaturePPN
 from wise.ppn.resnet import ResNetPPN
 from wise.ppn.simple import SimpleNet
 from wise.ppn.stats import StatsNet
+from wise.ppn.unet import LocalPPN
 
 ARCHITECTURES: dict[str, type[nn.Module]] = {
     "simple": SimpleNet,
@@ -29,6 +35,8 @@ ARCHITECTURES: dict[str, type[nn.Module]] = {
     "resnet": ResNetPPN,
     "multifeature": MultiFeaturePPN,
 }
+
+LOCAL_ARCHITECTURES: dict[str, type[nn.Module]] = {"unet": LocalPPN}
 
 
 def create(architecture: str, params: int) -> nn.Module:
@@ -40,4 +48,22 @@ def create(architecture: str, params: int) -> nn.Module:
     return ARCHITECTURES[architecture](params)
 
 
-__all__ = ["ARCHITECTURES", "MultiFeaturePPN", "ResNetPPN", "SimpleNet", "StatsNet", "create"]
+def create_local(architecture: str, params: int, **options: int) -> nn.Module:
+    """A local network by name (``unet``) painting ``params`` masks; ``options`` are its
+    constructor's (e.g. ``depth``, ``width``, ``max_width``)."""
+    if architecture not in LOCAL_ARCHITECTURES:
+        raise WiseError(f"unknown local architecture {architecture!r}; use one of {', '.join(LOCAL_ARCHITECTURES)}")
+    return LOCAL_ARCHITECTURES[architecture](params, **options)
+
+
+__all__ = [
+    "ARCHITECTURES",
+    "LOCAL_ARCHITECTURES",
+    "LocalPPN",
+    "MultiFeaturePPN",
+    "ResNetPPN",
+    "SimpleNet",
+    "StatsNet",
+    "create",
+    "create_local",
+]

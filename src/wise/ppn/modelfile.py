@@ -5,16 +5,20 @@ A model file holds the network's weights (float32 or float16) and string metadat
 ``format``        ``"wise-ppn"``
 ``version``       ``"1"``
 ``effect``        the effect whose parameters it predicts
-``kind``          ``"global"``
-``architecture``  a name of :data:`wise.ppn.ARCHITECTURES`
+``kind``          ``"global"`` (parameters from photo and example) or ``"local"`` (parameter
+                  masks from the photo alone)
+``architecture``  a name of :data:`wise.ppn.ARCHITECTURES` (global) or
+                  :data:`wise.ppn.LOCAL_ARCHITECTURES` (local)
+``network``       JSON of the architecture's options (a local network's depth and widths)
 ``parameters``    JSON list of the parameter names, in the order of the outputs
 ``ranges``        JSON list of ``[min, max]`` per parameter (real units, for information)
-``size``          the working size: both images are resized to this short side
+``size``          the working size: the images are resized to this short side
 ``render_size``   the short side the training examples were rendered at
 ``settings``      JSON of the training command's settings
 ``wise_version``  the package version that wrote it
 
-Built-in models live in ``wise/ppn/models/<effect>.safetensors``.
+Built-in models live in ``wise/ppn/models/``: ``<effect>.safetensors`` (global) and
+``<effect>-<task>.safetensors`` (local, named ``builtin:<task>`` on the command line).
 """
 
 from __future__ import annotations
@@ -34,14 +38,15 @@ from wise import effects
 from wise.errors import WiseError
 from wise.files import MAX_MODEL_BYTES, read_safetensors, read_safetensors_header, safetensors_path
 from wise.io import atomic_path
-from wise.ppn import ARCHITECTURES, create
+from wise.ppn import ARCHITECTURES, LOCAL_ARCHITECTURES, create, create_local
 
 FORMAT = "wise-ppn"
 VERSION = "1"
-KIND = "global"
+KINDS = ("global", "local")
 WHAT = "model file"
-TRAIN_ONE = "train one with 'wise train global'"
+TRAIN_ONE = "train one with 'wise train global' or 'wise train local'"
 BUILTIN_PACKAGE = "wise.ppn.models"
+BUILTIN_PREFIX = "builtin:"
 
 
 @dataclass
@@ -57,12 +62,22 @@ class ModelInfo:
     wise_version: str = ""
     source: str = ""
     """The file it was read from (or ``builtin:<effect>``)."""
+    kind: str = "global"
+    network: dict = field(default_factory=dict)
+    """The architecture's options (a local network's ``depth``, ``width``, ``max_width``)."""
+
+
+def build_network(info: ModelInfo) -> nn.Module:
+    """An untrained network of the architecture and options ``info`` names."""
+    if info.kind == "local":
+        return create_local(info.architecture, len(info.parameters), **info.network)
+    return create(info.architecture, len(info.parameters))
 
 
 def save_model(path: str | os.PathLike[str], network: nn.Module, info: ModelInfo, half: bool = False) -> None:
     """Write ``network``'s weights and ``info`` to ``path`` atomically (float16 with ``half``)."""
-    if info.architecture not in ARCHITECTURES:
-        raise WiseError(f"unknown architecture {info.architecture!r}")
+    if info.kind not in KINDS or info.architecture not in _architectures(info.kind):
+        raise WiseError(f"unknown {info.kind} architecture {info.architecture!r}")
     effect = effects.create(info.effect)
     dtype = torch.float16 if half else torch.float32
     tensors = {name: value.detach().to("cpu", dtype).contiguous() for name, value in network.state_dict().items()}
@@ -70,8 +85,9 @@ def save_model(path: str | os.PathLike[str], network: nn.Module, info: ModelInfo
         "format": FORMAT,
         "version": VERSION,
         "effect": info.effect,
-        "kind": KIND,
+        "kind": info.kind,
         "architecture": info.architecture,
+        "network": json.dumps(info.network, sort_keys=True),
         "parameters": json.dumps(info.parameters),
         "ranges": json.dumps([[s.min, s.max] for s in effect.param_specs]),
         "size": str(info.size),
@@ -87,12 +103,24 @@ def save_model(path: str | os.PathLike[str], network: nn.Module, info: ModelInfo
         raise WiseError(f"{path}: cannot write the model ({e.strerror or e})") from None
 
 
-def builtin_model_path(effect: str) -> Path:
-    """The model shipped for ``effect``; refuses an effect without one."""
+def _architectures(kind: str) -> dict[str, type[nn.Module]]:
+    return LOCAL_ARCHITECTURES if kind == "local" else ARCHITECTURES
+
+
+def builtin_model_path(effect: str, task: str | None = None) -> Path:
+    """The global model shipped for ``effect``, or its local model for ``task``; refuses a
+    model that is not shipped, naming those that are."""
     effects.create(effect)
-    path = Path(str(resources.files(BUILTIN_PACKAGE) / f"{effect}.safetensors"))
+    name = effect if task is None else f"{effect}-{task}"
+    path = Path(str(resources.files(BUILTIN_PACKAGE) / f"{name}.safetensors"))
     if not path.is_file():
-        raise WiseError(f"no built-in model for {effect!r}; pass --model FILE ({TRAIN_ONE})")
+        shipped = sorted(
+            BUILTIN_PREFIX + p.name[len(effect) + 1 : -len(".safetensors")]
+            for p in Path(str(resources.files(BUILTIN_PACKAGE))).glob(f"{effect}-*.safetensors")
+        )
+        what = f"built-in model for {effect!r}" if task is None else f"built-in model {BUILTIN_PREFIX}{task}"
+        others = f" (built-in local models of {effect}: {', '.join(shipped)})" if shipped else ""
+        raise WiseError(f"no {what}{others}; pass --model FILE ({TRAIN_ONE})")
     return path
 
 
@@ -111,23 +139,32 @@ def _info(path: Path, metadata: dict[str, str], effect: str | None) -> ModelInfo
     if fmt != FORMAT:
         found = "no wise metadata" if fmt is None else f"format {fmt!r}"
         raise WiseError(f"{path}: not a wise model file ({found}, expected {FORMAT!r}); {TRAIN_ONE}")
-    if metadata.get("version") != VERSION or metadata.get("kind") != KIND:
+    kind = metadata.get("kind", "")
+    if metadata.get("version") != VERSION or kind not in KINDS:
         raise WiseError(
-            f"{path}: unsupported model (version {metadata.get('version')!r}, kind {metadata.get('kind')!r}); "
-            f"this wise reads version {VERSION!r} {KIND} models"
+            f"{path}: unsupported model (version {metadata.get('version')!r}, kind {kind!r}); "
+            f"this wise reads version {VERSION!r} models of the kinds {', '.join(KINDS)}"
         )
     model_effect = metadata.get("effect", "")
     if effect is not None and model_effect != effect:
         raise WiseError(f"{path}: a model for {model_effect!r}, not {effect!r}; pass a model of {effect!r}")
     known = effects.create(effect or model_effect)
     architecture = metadata.get("architecture", "")
-    if architecture not in ARCHITECTURES:
-        raise WiseError(f"{path}: unknown architecture {architecture!r}; use one of {', '.join(ARCHITECTURES)}")
+    known_architectures = _architectures(kind)
+    if architecture not in known_architectures:
+        raise WiseError(
+            f"{path}: unknown {kind} architecture {architecture!r}; use one of {', '.join(known_architectures)}"
+        )
     try:
         parameters = json.loads(metadata.get("parameters", ""))
         settings = json.loads(metadata.get("settings", "{}"))
+        network = json.loads(metadata.get("network", "{}"))
     except json.JSONDecodeError:
         raise WiseError(f"{path}: the model's metadata is not valid JSON; {TRAIN_ONE}") from None
+    if not isinstance(network, dict) or not all(
+        isinstance(k, str) and isinstance(v, int) and not isinstance(v, bool) for k, v in network.items()
+    ):
+        raise WiseError(f"{path}: the model's network options are not whole numbers by name; {TRAIN_ONE}")
     if parameters != known.param_names:
         raise WiseError(
             f"{path}: the model predicts other parameters than {known.name!r} has now; retrain it ({TRAIN_ONE})"
@@ -141,24 +178,42 @@ def _info(path: Path, metadata: dict[str, str], effect: str | None) -> ModelInfo
         settings=settings if isinstance(settings, dict) else {},
         wise_version=metadata.get("wise_version", ""),
         source=str(path),
+        kind=kind,
+        network=network,
     )
 
 
-def model_info(path: str | os.PathLike[str], effect: str | None = None) -> ModelInfo:
-    """The checked metadata of a model file, reading no weights; with ``effect``, refuses a
-    model of another effect."""
+def _check_kind(path: Path, info: ModelInfo, kind: str | None) -> ModelInfo:
+    if kind is not None and info.kind != kind:
+        how = "from photo and example" if info.kind == "global" else "as masks from the photo alone"
+        needs = "--target" if info.kind == "global" else "no --target"
+        raise WiseError(
+            f"{path}: a {info.kind} model (it predicts parameters {how}), not a {kind} one; "
+            f"a {info.kind} model takes {needs}"
+        )
+    return info
+
+
+def model_info(path: str | os.PathLike[str], effect: str | None = None, kind: str | None = None) -> ModelInfo:
+    """The checked metadata of a model file, reading no weights; with ``effect`` or ``kind``,
+    refuses a model of another effect or kind."""
     path = safetensors_path(path, WHAT)
     _, metadata = read_safetensors_header(path, WHAT, MAX_MODEL_BYTES)
-    return _info(path, metadata, effect)
+    return _check_kind(path, _info(path, metadata, effect), kind)
 
 
-def load_model(path: str | os.PathLike[str], effect: str | None = None) -> tuple[nn.Module, ModelInfo]:
+def load_model(
+    path: str | os.PathLike[str], effect: str | None = None, kind: str | None = None
+) -> tuple[nn.Module, ModelInfo]:
     """The network of a model file (float32, evaluation mode) and its metadata. Every weight's
     name and shape is checked against the architecture before anything is loaded."""
     path = safetensors_path(path, WHAT)
     entries, metadata = read_safetensors_header(path, WHAT, MAX_MODEL_BYTES)
-    info = _info(path, metadata, effect)
-    network = create(info.architecture, len(info.parameters))
+    info = _check_kind(path, _info(path, metadata, effect), kind)
+    try:
+        network = build_network(info)
+    except (TypeError, WiseError) as e:
+        raise WiseError(f"{path}: the model's network options do not make a network ({e}); {TRAIN_ONE}") from None
     expected = network.state_dict()
     missing = sorted(set(expected) - set(entries))
     unexpected = sorted(set(entries) - set(expected))
@@ -184,8 +239,21 @@ def load_model(path: str | os.PathLike[str], effect: str | None = None) -> tuple
     return network.eval(), info
 
 
-def resolve_model(model: str | os.PathLike[str] | None, effect: str) -> Path:
-    """``model`` (checked to be a model of ``effect``) or the built-in model of ``effect``."""
-    path = builtin_model_path(effect) if model is None else Path(model)
-    model_info(path, effect)
+def model_path(model: str | os.PathLike[str] | None, effect: str) -> Path:
+    """The file ``model`` names: None is the built-in global model of ``effect``,
+    ``builtin:<task>`` its built-in local model for a task (``builtin:<effect>`` the global one)."""
+    if model is None:
+        return builtin_model_path(effect)
+    text = os.fspath(model)
+    if text.startswith(BUILTIN_PREFIX):
+        task = text[len(BUILTIN_PREFIX) :]
+        return builtin_model_path(effect, None if task == effect else task)
+    return Path(text)
+
+
+def resolve_model(model: str | os.PathLike[str] | None, effect: str, kind: str | None = None) -> Path:
+    """The file of ``model`` (see :func:`model_path`), checked to be a model of ``effect``
+    (and of ``kind`` when given)."""
+    path = model_path(model, effect)
+    model_info(path, effect, kind)
     return path

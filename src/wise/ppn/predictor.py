@@ -1,7 +1,8 @@
-"""A trained model ready to predict: ``Predictor(model, effect)(photo, example)``.
+"""Trained models ready to predict: ``Predictor(model, effect)(photo, example)`` (global
+parameters) and ``LocalPredictor(model, effect)(photo)`` (parameter masks).
 
-It resizes photo and example to the model's working size before the network's one forward
-pass; the commands that predict (``wise predict``, the benchmarks) share it.
+They resize the images to the model's working size before the network's one forward pass;
+the commands that predict (``wise predict``, the benchmarks) share them.
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ import os
 import torch
 import torch.nn.functional as F
 
-from wise.ppn.modelfile import load_model, resolve_model
+from wise.ppn.modelfile import BUILTIN_PREFIX, load_model, resolve_model
 
 
 def at_short_side(image: torch.Tensor, short_side: int) -> torch.Tensor:
@@ -28,12 +29,14 @@ class Predictor:
     """A loaded model: ``predictor(photo, example)`` -> normalized global parameters ``(B, P)``."""
 
     def __init__(self, model: str | os.PathLike[str] | None, effect: str, device: torch.device | str = "cpu") -> None:
-        path = resolve_model(model, effect)
-        self.network, self.info = load_model(path, effect)
+        path = resolve_model(model, effect, "global")
+        self.network, self.info = load_model(path, effect, "global")
         self.network.to(device)
         self.device = torch.device(device)
         if model is None:
             self.info.source = f"builtin:{effect}"
+        elif str(model).startswith(BUILTIN_PREFIX):
+            self.info.source = str(model)
 
     @torch.no_grad()
     def __call__(self, photo: torch.Tensor, example: torch.Tensor) -> torch.Tensor:
@@ -41,3 +44,21 @@ class Predictor:
         small_photo = at_short_side(photo, size).to(self.device)
         small_example = at_short_side(example, size).to(self.device)
         return self.network(small_photo, small_example).float().cpu()
+
+
+class LocalPredictor:
+    """A loaded local model: ``predictor(photo)`` -> normalized parameter masks ``(B, P, h, w)``
+    at the model's working size (the short side it was trained at; the effect enlarges them
+    to the picture it renders)."""
+
+    def __init__(self, model: str | os.PathLike[str], effect: str, device: torch.device | str = "cpu") -> None:
+        path = resolve_model(model, effect, "local")
+        self.network, self.info = load_model(path, effect, "local")
+        self.network.to(device)
+        self.device = torch.device(device)
+        if str(model).startswith(BUILTIN_PREFIX):
+            self.info.source = str(model)
+
+    @torch.no_grad()
+    def __call__(self, photo: torch.Tensor) -> torch.Tensor:
+        return self.network(at_short_side(photo, self.info.size).to(self.device)).float().cpu()

@@ -36,3 +36,11 @@ def prediction_loss(
     if effect is None or photo is None or example is None:
         raise WiseError(f"the {kind} loss needs the effect, the photos and the examples")
     return _distance(effect(photo, predicted, scale=scale), example, norm)
+
+
+def total_variation(masks: torch.Tensor) -> torch.Tensor:
+    """Mean absolute difference of neighbouring pixels of ``(B, C, H, W)`` masks, across and
+    down (anisotropic total variation): how far the masks are from piecewise constant."""
+    across = (masks[..., :, 1:] - masks[..., :, :-1]).abs().mean()
+    down = (masks[..., 1:, :] - masks[..., :-1, :]).abs().mean()
+    return across + down

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import lightning as L
@@ -15,10 +14,8 @@ from wise.filters.smoothing import annealed_temperature, smoothed_steps
 from wise.train.data import ExampleDataset
 from wise.train.losses import prediction_loss
 from wise.train.sampler import GlobalBatchSampler
+from wise.train.schedules import scheduled
 
-LR_SCHEDULES = ("constant", "cosine")
-COSINE_FLOOR = 0.05
-"""The cosine schedule's learning rate at the end of the run, as a share of ``lr``."""
 ANNEALED_SHARE = 0.5
 """Share of a training run that keeps the effect's steps sharp at its end."""
 
@@ -92,14 +89,9 @@ class GlobalPPN(L.LightningModule):
     def configure_optimizers(self) -> Any:
         optimizer = torch.optim.Adam(self.network.parameters(), lr=self.lr)
         total = self.trainer.estimated_stepping_batches if self._trainer is not None else 0
-        if self.lr_schedule != "cosine" or not total or total == float("inf"):
+        schedule = scheduled(optimizer, self.lr_schedule, total)
+        if schedule is None:
             return optimizer
-
-        def factor(step: int) -> float:
-            progress = min(1.0, step / total)
-            return COSINE_FLOOR + (1.0 - COSINE_FLOOR) * 0.5 * (1.0 + math.cos(math.pi * progress))
-
-        schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, factor)
         return {"optimizer": optimizer, "lr_scheduler": {"scheduler": schedule, "interval": "step"}}
 
 

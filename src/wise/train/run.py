@@ -11,25 +11,23 @@ from __future__ import annotations
 import dataclasses
 import json
 import sys
-import time
 from pathlib import Path
 from typing import TextIO
 
 import lightning as L
 import torch
 from lightning.pytorch.callbacks import Callback
-from lightning.pytorch.loggers import CSVLogger
 
 from wise.errors import WiseError
-from wise.interrupt import CtrlC, ctrl_c
+from wise.interrupt import ctrl_c
 from wise.io import atomic_path
 from wise.ppn.modelfile import ModelInfo, save_model
 from wise.train.data import ExampleDataset
+from wise.train.engine import Stopper, Throughput, log_files, trainer_options
 from wise.train.module import ExampleData, GlobalPPN
 from wise.train.report import write_training_report
 from wise.train.settings import (
     CHECKPOINT,
-    LOGS,
     MODEL_FILE,
     REPORT_FILE,
     SETTINGS_FILE,
@@ -38,66 +36,6 @@ from wise.train.settings import (
     is_launched_rank,
     prepare,
 )
-
-
-class _Stopper(Callback):
-    """Ends training at the next step after Ctrl-C (on every process at once), and writes the
-    checkpoint every ``every`` steps."""
-
-    def __init__(self, interruption: CtrlC, checkpoint: Path, every: int) -> None:
-        self.interruption, self.checkpoint, self.every = interruption, checkpoint, every
-
-    def on_train_batch_end(self, trainer: L.Trainer, *args: object) -> None:
-        if trainer.strategy.reduce_boolean_decision(self.interruption.received, all=False):
-            trainer.should_stop = True
-        elif trainer.global_step % self.every == 0:
-            trainer.save_checkpoint(self.checkpoint, weights_only=False)
-
-
-class _Throughput(Callback):
-    """Examples per second of all processes together: over the whole run (rendering the
-    examples and validation included), and over the training steps alone."""
-
-    def __init__(self, batch: int) -> None:
-        self.batch, self.steps, self.step_seconds = batch, 0, 0.0
-        self._began = self._step_began = self._ended = 0.0
-
-    def on_train_start(self, *args: object) -> None:
-        self._began = time.perf_counter()
-
-    def on_train_end(self, *args: object) -> None:
-        self._ended = time.perf_counter()
-
-    def on_train_batch_start(self, *args: object) -> None:
-        self._step_began = time.perf_counter()
-
-    def on_train_batch_end(self, *args: object) -> None:
-        self.step_seconds += time.perf_counter() - self._step_began
-        self.steps += 1
-
-    def rates(self, world: int) -> dict[str, float]:
-        examples = self.steps * self.batch * world
-        wall = (self._ended or time.perf_counter()) - self._began
-        return {
-            "examples_per_second": round(examples / wall, 2) if wall > 0 else 0.0,
-            "step_examples_per_second": round(examples / self.step_seconds, 2) if self.step_seconds else 0.0,
-        }
-
-
-def _log_files(folder: Path) -> list[Path]:
-    parts = [p for p in (folder / LOGS).glob("*") if p.name.isdigit()]
-    return [p / "metrics.csv" for p in sorted(parts, key=lambda p: int(p.name))]
-
-
-def _log_part(folder: Path) -> int:
-    """The number of the log part of a new start (an earlier start's log is kept)."""
-    files = _log_files(folder)
-    return int(files[-1].parent.name) + 1 if files else 0
-
-
-def _precision(accelerator: str) -> str:
-    uses_gpu = accelerator in ("gpu", "cuda") or (accelerator == "auto" and torch.cuda.is_available())
-    return "16-mixed" if uses_gpu else "32-true"
 
 
 def _datasets(
@@ -121,26 +59,13 @@ def _datasets(
 
 
 def _trainer(settings: TrainSettings, folder: Path, callbacks: list[Callback]) -> L.Trainer:
-    processes = settings.devices * settings.num_nodes
-    steps_per_epoch = settings.examples // (settings.batch * processes)
+    steps_per_epoch = settings.examples // (settings.batch * settings.devices * settings.num_nodes)
     return L.Trainer(
-        accelerator=settings.accelerator,
-        devices=settings.devices,
-        num_nodes=settings.num_nodes,
-        strategy="ddp" if processes > 1 else "auto",
-        precision=_precision(settings.accelerator),
         max_steps=settings.steps if settings.steps is not None else -1,
         max_epochs=settings.epochs if settings.epochs is not None else (-1 if settings.steps else 1),
-        logger=CSVLogger(folder, name=LOGS, version=str(_log_part(folder))),
-        callbacks=callbacks,
-        default_root_dir=folder,
-        enable_checkpointing=False,
-        enable_model_summary=False,
         use_distributed_sampler=False,
-        log_every_n_steps=max(1, min(10, steps_per_epoch)),
-        val_check_interval=min(steps_per_epoch, settings.checkpoint_every),
         check_val_every_n_epoch=None if settings.steps else 1,
-        num_sanity_val_steps=0,
+        **trainer_options(folder, callbacks, settings, steps_per_epoch),
     )
 
 
@@ -178,9 +103,9 @@ def train_global(
             Path(path).write_text(json.dumps(dataclasses.asdict(settings), indent=2) + "\n")
     with ctrl_c(out) as interruption:
         interruption.hold()
-        throughput = _Throughput(settings.batch)
+        throughput = Throughput(settings.batch)
         trainer = _trainer(
-            settings, folder, [_Stopper(interruption, folder / CHECKPOINT, settings.checkpoint_every), throughput]
+            settings, folder, [Stopper(interruption, folder / CHECKPOINT, settings.checkpoint_every), throughput]
         )
         checkpoint = folder / CHECKPOINT if resume else None
         trainer.fit(module, datamodule=data, ckpt_path=checkpoint, weights_only=True if checkpoint else None)
@@ -214,7 +139,7 @@ def _write_results(
         settings.effect, settings.architecture, module.effect.param_names, settings.size, settings.render_size, shared
     )
     save_model(folder / MODEL_FILE, module.network, info, half=settings.half)
-    write_training_report(folder / REPORT_FILE, module, datasets[1], _log_files(folder), summary)
+    write_training_report(folder / REPORT_FILE, module, datasets[1], log_files(folder), summary)
     print(
         f"{summary['steps']} steps; {summary['examples_per_second']:.1f} examples/s in all, "
         f"{summary['step_examples_per_second']:.1f} in the training steps; "

@@ -127,13 +127,14 @@ def check_run_folder(folder: Path, resume: bool) -> None:
         raise WiseError(f"{folder}: holds a training run; pass --resume to continue it, or choose another folder")
 
 
-def check_resumed(folder: Path, settings: TrainSettings) -> None:
+def check_resumed(folder: Path, settings: object, keys: tuple[str, ...] = RESUMABLE) -> None:
+    """Refuse to resume the run in ``folder`` with other ``keys`` of the settings (a dataclass)."""
     try:
         before = json.loads((folder / SETTINGS_FILE).read_text())
     except (OSError, ValueError):
         raise WiseError(f"{folder}: {SETTINGS_FILE} is missing or unreadable; cannot resume this run") from None
-    now = dataclasses.asdict(settings)
-    changed = [key for key in RESUMABLE if before.get(key) != now.get(key)]
+    now = dataclasses.asdict(settings)  # type: ignore[call-overload]
+    changed = [key for key in keys if before.get(key) != now.get(key)]
     if changed:
         listed = ", ".join(f"{key} {before.get(key)!r} -> {now.get(key)!r}" for key in changed)
         raise WiseError(f"{folder}: --resume with other settings than the run ({listed}); repeat its settings")
