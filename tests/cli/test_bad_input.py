@@ -118,6 +118,28 @@ def _models(root: Path, photo: Image.Image) -> None:
         photo.resize((200 + 8 * index, 150)).save(root / "photos4" / f"photo{index}.png")
     (root / "old-run").mkdir()
     (root / "old-run" / "settings.json").write_text("{}")
+    for effect in ("xdog", "cartoon"):
+        names = wise.effects.create(effect).param_names
+        info = ModelInfo(effect, "unet", names, size=64, render_size=64, kind="local", network={"depth": 2, "width": 4})
+        save_model(root / f"{effect}-local.safetensors", ppn.create_local("unet", len(names), depth=2, width=4), info)
+    _pairs(root, photo)
+
+
+def _pairs(root: Path, photo: Image.Image) -> None:
+    """Paired folders: a good one of XDoG's task, one with a photo whose target is missing, one
+    without a test split."""
+    small = photo.resize((64, 48))
+    for split in ("train", "test"):
+        for side in ("A", "B"):
+            (root / "pairs" / split / side).mkdir(parents=True)
+            small.save(root / "pairs" / split / side / "one.png")
+    (root / "pairs" / "task.json").write_text('{"task": "contours", "effect": "xdog", "preset": "portrait"}')
+    for side, name in (("A", "one"), ("A", "two"), ("B", "one")):
+        (root / "pairs-unpaired" / "train" / side).mkdir(parents=True, exist_ok=True)
+        small.save(root / "pairs-unpaired" / "train" / side / f"{name}.png")
+    for side in ("A", "B"):
+        (root / "pairs-no-test" / "train" / side).mkdir(parents=True)
+        small.save(root / "pairs-no-test" / "train" / side / "one.png")
 
 
 def _with_nan(source: Path, good: torch.Tensor, bad: torch.Tensor) -> bytes:
@@ -168,6 +190,9 @@ PREDICT = (
 PREDICT_WITH = "predict xdog --content {root}/photo.png --target {root}/target.png -o {root}/pred --model"
 TRAIN = "train global xdog --images {root}/photos4 -o {root}/train-run"
 PPN = "bench ppn xdog --images {root}/photos --json {root}/ppn.json --model"
+LOCAL = "train local xdog --pairs {root}/pairs -o {root}/local-run"
+PAINT = "predict xdog --content {root}/photo.png -o {root}/pred --model"
+PAIRS = "bench pairs --pairs {root}/pairs --json {root}/pairs.json --model"
 
 CASES: dict[str, Case] = {
     # predict
@@ -212,6 +237,38 @@ CASES: dict[str, Case] = {
     "train: window above size": Case(TRAIN + " --size 64 --window 100", "--window 100 must be from 8"),
     "train: too few examples": Case(TRAIN + " --examples 4 --batch 8", "fewer than one global batch"),
     "train: backbone for simple": Case(TRAIN + " --backbone-weights {root}/xdog.safetensors", "no ImageNet backbone"),
+    # train local, predict and bench with local models
+    "train local: missing pairs": Case(LOCAL.replace("/pairs", "/nope"), "not a directory of pairs"),
+    "train local: photo without a target": Case(
+        LOCAL.replace("/pairs", "/pairs-unpaired"), "1 photo in A/ without a target in B/ (two)"
+    ),
+    "train local: no test split": Case(LOCAL.replace("/pairs", "/pairs-no-test"), "no test/ folder"),
+    "train local: pairs of another effect": Case(LOCAL.replace("xdog", "cartoon", 1), "pairs of the 'xdog' effect"),
+    "train local: crop above the load size": Case(LOCAL + " --load-size 64 --crop-size 96", "larger than --load-size"),
+    "train local: nothing to learn": Case(LOCAL + " --gan-weight 0 --l1-weight 0", "nothing would be learned"),
+    "train local: negative --tv-weight": Case(LOCAL + " --tv-weight -1", "--tv-weight: must be at least 0"),
+    "train local: unknown --start": Case(LOCAL + " --start noir", "no preset 'noir'"),
+    "train local: --depth 1": Case(LOCAL + " --depth 1", "--depth: must be from 2"),
+    "train local: folder holds a run": Case(LOCAL.replace("local-run", "old-run"), "pass --resume"),
+    "predict: local model with --target": Case(
+        PAINT + " {root}/xdog-local.safetensors --target {root}/target.png", "leave out --target"
+    ),
+    "predict: global model without --target": Case(PAINT + " {root}/xdog-model.safetensors", "--target is required"),
+    "predict: local model of another effect": Case(
+        PAINT + " {root}/cartoon-local.safetensors", "a model for 'cartoon'"
+    ),
+    "predict: unknown built-in task": Case(PAINT + " builtin:chin", "no built-in model builtin:chin"),
+    "bench pairs: global model": Case(PAIRS + " {root}/xdog-model.safetensors", "a global model"),
+    "bench pairs: photo without a target": Case(
+        PAIRS.replace("/pairs ", "/pairs-unpaired/train ") + " {root}/xdog-local.safetensors", "without a target"
+    ),
+    "bench pairs: json is a folder": Case(
+        PAIRS.replace("pairs.json", "results.json") + " {root}/xdog-local.safetensors", "is a directory"
+    ),
+    "bench pairs: model of another effect": Case(
+        PAIRS + " {root}/xdog-local.safetensors --effect cartoon", "a model for 'xdog'"
+    ),
+    "bench ppn: local model": Case(PPN + " {root}/xdog-local.safetensors", "a local model"),
     # bench ppn and recover --init ppn
     "bench ppn: model of another effect": Case(PPN + " {root}/cartoon-model.safetensors", "a model for 'cartoon'"),
     "bench ppn: corrupt model": Case(PPN + " {root}/cut-model.safetensors", "not a safetensors file"),
