@@ -116,3 +116,23 @@ def test_train_local_runs_resumes_and_writes_its_run(world: dict[str, Path], tmp
     _, info = load_model(run / "model.safetensors", "xdog", "local")
     assert info.settings["steps_done"] == 5 and info.settings["task"] == "dark" and info.size == 64
     assert sorted(p.name for p in (run / "logs").iterdir()) == ["0", "1"]
+
+
+def test_train_local_runs_on_two_ddp_processes(world: dict[str, Path], tmp_path: Path) -> None:
+    import os
+    import subprocess
+    import sys
+
+    import wise
+
+    source = Path(wise.__file__).resolve().parent.parent
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(source), os.environ.get("PYTHONPATH")]))}
+    argv = ["train", "local", "xdog", "--pairs", str(world["pairs"]), "-o", str(tmp_path / "run"), "--depth", "3",
+            "--width", "8", "--max-width", "16", "--discriminator-width", "8", "--load-size", "64", "--crop-size",
+            "48", "--accelerator", "cpu", "--devices", "2", "--steps", "2", "--checkpoint-every", "1"]  # fmt: skip
+    done = subprocess.run(
+        [sys.executable, "-m", "wise", *argv], capture_output=True, text=True, env=env, timeout=300, cwd=tmp_path
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    _, info = load_model(tmp_path / "run" / "model.safetensors", "xdog", "local")
+    assert info.settings["processes"] == 2 and info.settings["steps_done"] == 2

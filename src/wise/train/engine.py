@@ -77,17 +77,21 @@ def precision(accelerator: str) -> str:
     return "16-mixed" if uses_gpu else "32-true"
 
 
-def trainer_options(folder: Path, callbacks: list[Callback], settings: object, per_process: int) -> dict:
+def trainer_options(
+    folder: Path, callbacks: list[Callback], settings: object, per_process: int, partial_backward: bool = False
+) -> dict:
     """The ``L.Trainer`` options every run shares: the settings' devices, nodes and precision,
     the numbered CSV log part of ``folder``, no Lightning checkpoints or summaries (the runs
     write their own), and validation every ``checkpoint_every`` steps or epoch of
-    ``per_process`` steps, whichever comes first."""
+    ``per_process`` steps, whichever comes first. ``partial_backward``: some backward passes
+    reach only part of the model (a GAN's generator and discriminator steps), which DDP must
+    be told."""
     processes = settings.devices * settings.num_nodes  # type: ignore[attr-defined]
     return {
         "accelerator": settings.accelerator,  # type: ignore[attr-defined]
         "devices": settings.devices,  # type: ignore[attr-defined]
         "num_nodes": settings.num_nodes,  # type: ignore[attr-defined]
-        "strategy": "ddp" if processes > 1 else "auto",
+        "strategy": ("ddp_find_unused_parameters_true" if partial_backward else "ddp") if processes > 1 else "auto",
         "precision": precision(settings.accelerator),  # type: ignore[attr-defined]
         "logger": CSVLogger(folder, name=LOGS, version=str(log_part(folder))),
         "callbacks": callbacks,

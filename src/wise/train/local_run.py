@@ -53,7 +53,7 @@ def _trainer(settings: LocalSettings, folder: Path, callbacks: list, batches_per
         max_epochs=settings.epochs if settings.epochs is not None else -1,
         check_val_every_n_epoch=1,
         reload_dataloaders_every_n_epochs=1,
-        **trainer_options(folder, callbacks, settings, per_process),
+        **trainer_options(folder, callbacks, settings, per_process, partial_backward=optimizers > 1),
     )
 
 
