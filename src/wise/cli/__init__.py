@@ -18,12 +18,12 @@ from typing import Sequence, TextIO
 import torch
 
 from wise import __version__
-from wise.cli import apply, bench, edit, effects, optimize, predict, train
+from wise.cli import apply, bench, data, edit, effects, optimize, predict, train
 from wise.cli.parser import EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_USAGE, PROG, Parser, apply_pixel_limit, one_line
 from wise.errors import WiseError, WiseWarning
 from wise.io import MAX_PIXELS_ENV
 
-COMMAND_GROUPS = (effects, apply, optimize, predict, train, edit, bench)
+COMMAND_GROUPS = (effects, apply, optimize, predict, train, data, edit, bench)
 
 
 def build_parser() -> argparse.ArgumentParser:

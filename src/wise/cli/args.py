@@ -35,8 +35,9 @@ def _number(text: str, kind: Callable[[str], float | int], noun: str) -> float |
         raise argparse.ArgumentTypeError(f"{text!r} is not {noun}") from None
 
 
-def finite_float(minimum: float | None = None, maximum: float | None = None, above: bool = False):
-    """A finite real number, at least ``minimum`` (above it when ``above``) and at most ``maximum``."""
+def finite_float(minimum: float | None = None, maximum: float | None = None, above: bool = False, below: bool = False):
+    """A finite real number, at least ``minimum`` (above it when ``above``) and at most ``maximum``
+    (below it when ``below``)."""
 
     def parse(text: str) -> float:
         value = float(_number(text, float, "a number"))
@@ -45,8 +46,9 @@ def finite_float(minimum: float | None = None, maximum: float | None = None, abo
         if minimum is not None and (value <= minimum if above else value < minimum):
             relation = "above" if above else "at least"
             raise argparse.ArgumentTypeError(f"must be {relation} {minimum:g}, got {text}")
-        if maximum is not None and value > maximum:
-            raise argparse.ArgumentTypeError(f"must be at most {maximum:g}, got {text}")
+        if maximum is not None and (value >= maximum if below else value > maximum):
+            relation = "below" if below else "at most"
+            raise argparse.ArgumentTypeError(f"must be {relation} {maximum:g}, got {text}")
         return value
 
     return parse
@@ -88,4 +90,6 @@ batch = whole_number(1, 4096)
 examples = whole_number(1, 10_000_000)
 processes = whole_number(1, 4096)
 share = finite_float(0.0, 1.0)
+open_share = finite_float(0.0, 1.0, above=True, below=True)
+"""A share of two parts that both get something: above 0 and below 1."""
 positive_seconds = finite_float(0.0, 3600.0, above=True)

@@ -1,0 +1,109 @@
+"""``wise data adaptive``: synthetic paired data sets for content-adaptive effects (the pairs
+``wise train local`` learns from and ``wise bench pairs`` measures)."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import warnings
+from pathlib import Path
+from typing import TextIO
+
+from wise.cli import args as types
+from wise.cli.outputs import OutputFolder
+from wise.cli.parser import add_pixel_limit, add_size, command, exit_code
+from wise.errors import WiseError, WiseWarning
+from wise.train.adaptive import SPLITS, TASKS, AdaptiveSettings, load_photos, write_pairs
+from wise.train.local_settings import TASK_FILE
+
+MAX_PAIRS = 1_000_000
+"""Most pairs one command makes (a million pairs of 256 pixels take days and terabytes)."""
+DEFAULT_SIZE = 256
+"""pix2pix's crop size."""
+
+
+def _check_folders(images: Path, output: Path) -> None:
+    """The output folder is neither the photo folder nor inside it nor around it (pairs written
+    among the photos would be read as photos, photos among the pairs replaced), and holds no
+    pairs already (a set mixed of two runs would describe neither)."""
+    photos, pairs = Path(os.path.realpath(images)), Path(os.path.realpath(output))
+    if photos == pairs or photos in pairs.parents:
+        raise WiseError(f"{output}: inside the photo folder --images {images}; write the pairs elsewhere")
+    if pairs in photos.parents:
+        raise WiseError(f"{output}: holds the photo folder --images {images}; write the pairs elsewhere")
+    found = [name for name in (TASK_FILE, *SPLITS) if (output / name).exists()]
+    if found:
+        raise WiseError(
+            f"{output}: holds pairs already ({', '.join(found)}); choose another folder or remove them first"
+        )
+
+
+def run_adaptive(args: argparse.Namespace, out: TextIO) -> int:
+    settings = AdaptiveSettings(
+        task=args.task,
+        effect=args.effect,
+        preset=args.preset,
+        count=args.count,
+        size=args.size,
+        test_share=args.test_share,
+        seed=args.seed,
+    )
+    settings.resolve()
+    images, output = Path(args.images), Path(args.output)
+    if not images.is_dir():
+        raise WiseError(f"--images {images}: not a directory of photos")
+    folder = OutputFolder(output, (TASK_FILE,), {"--images": args.images})
+    _check_folders(images, output)
+    photos, skipped = load_photos(images, settings.size)
+    if skipped:
+        warnings.warn(f"{images}: skipped {len(skipped)} unreadable or too small files", WiseWarning, stacklevel=2)
+    with folder.guard():
+        summary = write_pairs(output, settings, photos, out=out)
+    return exit_code(summary["interrupted"])
+
+
+def register(commands: argparse._SubParsersAction) -> None:
+    data = command(commands, "data", "make data sets", writes=False)
+    kinds = data.add_subparsers(dest="kind", metavar="KIND", required=True, parser_class=type(data))
+    parser = command(
+        kinds,
+        "adaptive",
+        "make paired images whose targets change one parameter inside regions a rule finds in the photo",
+    )
+    rules = "; ".join(f"{name}: {task.description}" for name, task in TASKS.items())
+    parser.add_argument("task", choices=tuple(TASKS), metavar="TASK", help=f"{', '.join(TASKS)} ({rules})")
+    parser.add_argument(
+        "--images", required=True, metavar="DIR", help="folder of photos (searched recursively), at least 2"
+    )
+    parser.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        metavar="PAIRS",
+        help="folder of the pairs: task.json and train/, test/ with A/, B/, regions/ and params/ (must hold no pairs)",
+    )
+    parser.add_argument("--effect", default="xdog", metavar="EFFECT", help="effect name (default xdog)")
+    parser.add_argument(
+        "--preset", metavar="NAME", help="preset of the other parameters (default: portrait for xdog, else the first)"
+    )
+    parser.add_argument(
+        "--count",
+        type=types.whole_number(2, MAX_PAIRS),
+        default=200,
+        metavar="N",
+        help=f"pairs in all, 2 to {MAX_PAIRS:,} (default 200)",
+    )
+    add_size(parser, types.working_size, "the square pairs", default=DEFAULT_SIZE)
+    parser.add_argument(
+        "--test-share",
+        type=types.open_share,
+        default=0.2,
+        metavar="S",
+        help="share of the photos (not pairs) for the test split, above 0 and below 1 (default 0.2; "
+        "at least one photo in each split)",
+    )
+    parser.add_argument(
+        "--seed", type=types.seed, default=0, help="seed of the split and the crops, 0 to 2**63-1 (default 0)"
+    )
+    add_pixel_limit(parser)
+    parser.set_defaults(func=run_adaptive)
