@@ -16,7 +16,7 @@ from wise.cli import main
 from wise.train import adaptive
 
 IS_ROOT = hasattr(os, "geteuid") and os.geteuid() == 0
-SMALL = ["--count", "4", "--size", "32"]
+SMALL = ["--min-change", "0", "--count", "4", "--size", "32"]
 
 
 @pytest.fixture(scope="module")
@@ -41,7 +41,8 @@ def test_makes_a_small_set(photos: Path, tmp_path: Path, capsys: pytest.CaptureF
     out = tmp_path / "sets" / "pairs"
     code, stdout, err = run(["data", "adaptive", "details", "--images", str(photos), "-o", str(out), *SMALL], capsys)
     assert code == 0 and err == ""
-    assert re.fullmatch(r"3 training and 1 test pairs in .+; mean region share \d+%", stdout.splitlines()[-1])
+    summary = r"3 training and 1 test pairs in .+; mean region share \d+%; 0 left out where the change did not show"
+    assert re.fullmatch(summary, stdout.splitlines()[-1])
     task = json.loads((out / "task.json").read_text())
     assert task["task"] == "details" and task["count"] == 4 and task["size"] == 32
     assert len(list((out / "train" / "B").glob("*.png"))) == 3 and len(list((out / "test" / "B").glob("*.png"))) == 1

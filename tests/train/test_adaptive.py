@@ -34,7 +34,7 @@ BAND = 16
 RULES = {name: task.rule for name, task in TASKS.items()}
 TASK_KEYS = {
     "task", "effect", "preset", "parameter", "inside", "preset_value", "size", "count", "seed", "test_share",
-    "rule", "train_photos", "test_photos",
+    "min_change", "rule", "train_photos", "test_photos",
 }  # fmt: skip
 PAIR_SIZE = 48
 CHANGE_BAND = 3
@@ -185,8 +185,15 @@ def photos(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return root
 
 
-def _make(folder: Path, photos: Path, seed: int = 1, count: int = PAIR_COUNT, task: str = "background") -> dict:
-    settings = AdaptiveSettings(task, count=count, size=PAIR_SIZE, seed=seed)
+def _make(
+    folder: Path,
+    photos: Path,
+    seed: int = 1,
+    count: int = PAIR_COUNT,
+    task: str = "background",
+    min_change: float = 0.0,
+) -> dict:
+    settings = AdaptiveSettings(task, count=count, size=PAIR_SIZE, seed=seed, min_change=min_change)
     with pytest.warns(UserWarning, match="skipped 2 unreadable or too small files"):
         return write_pairs(folder, settings, images=photos, out=io.StringIO())
 
@@ -308,3 +315,19 @@ def test_too_few_photos_are_refused(photos: Path, tmp_path: Path) -> None:
     with pytest.raises(WiseError, match="1 readable photos of at least 48 pixels a side .* at least 2"):
         write_pairs(tmp_path / "out", AdaptiveSettings("details", size=PAIR_SIZE), images=lonely)
     assert not (tmp_path / "out").exists()
+
+
+def test_pairs_whose_change_does_not_show_are_left_out(photos: Path, tmp_path: Path) -> None:
+    everything = _make(tmp_path / "all", photos, min_change=1.0 - 1e-9)
+    assert everything["pairs"] == {"train": 0, "test": 0} and everything["left_out"] == PAIR_COUNT
+    visible = _make(tmp_path / "visible", photos, min_change=0.01)
+    kept = visible["pairs"]["train"] + visible["pairs"]["test"]
+    assert kept + visible["left_out"] == PAIR_COUNT and kept > 0
+    from wise import effects
+    from wise.io import read_image
+
+    xdog = effects.create("xdog")
+    for photo in (tmp_path / "visible" / "train" / "A").iterdir():
+        target = read_image(photo.parent.parent / "B" / photo.name)
+        at_preset = xdog(read_image(photo), xdog.preset("portrait")[None])
+        assert float((target - at_preset).abs().mean()) >= 0.01 - 2 / 255

@@ -13,7 +13,7 @@ from wise.cli import args as types
 from wise.cli.outputs import OutputFolder
 from wise.cli.parser import add_pixel_limit, add_size, command, exit_code
 from wise.errors import WiseError, WiseWarning
-from wise.train.adaptive import SPLITS, TASKS, AdaptiveSettings, load_photos, write_pairs
+from wise.train.adaptive import MIN_CHANGE, SPLITS, TASKS, AdaptiveSettings, load_photos, write_pairs
 from wise.train.local_settings import TASK_FILE
 
 MAX_PAIRS = 1_000_000
@@ -47,6 +47,7 @@ def run_adaptive(args: argparse.Namespace, out: TextIO) -> int:
         size=args.size,
         test_share=args.test_share,
         seed=args.seed,
+        min_change=args.min_change,
     )
     settings.resolve()
     images, output = Path(args.images), Path(args.output)
@@ -104,6 +105,14 @@ def register(commands: argparse._SubParsersAction) -> None:
     )
     parser.add_argument(
         "--seed", type=types.seed, default=0, help="seed of the split and the crops, 0 to 2**63-1 (default 0)"
+    )
+    parser.add_argument(
+        "--min-change",
+        type=types.finite_float(0.0, 1.0, below=True),
+        default=MIN_CHANGE,
+        metavar="D",
+        help=f"leave out pairs whose target differs from the preset's rendering by less than D on average "
+        f"(after 4 crops of the photo tried; default {MIN_CHANGE:g}, 0: keep all)",
     )
     add_pixel_limit(parser)
     parser.set_defaults(func=run_adaptive)

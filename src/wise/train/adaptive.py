@@ -63,6 +63,12 @@ BYTE = 255.0
 NAME_DIGITS = 3
 DISAMBIGUATOR_LENGTH = 6
 """Hexadecimal digits of a path's hash added to photo stems that several photos share."""
+MIN_CHANGE = 0.005
+"""Default least mean absolute difference between a pair's target and the preset's rendering of
+its photo: on flat or abstract pictures the change does not show (XDoG draws nothing there),
+and such a pair teaches a network nothing."""
+ATTEMPTS = 4
+"""Crops tried for a pair before it is left out because the change never shows."""
 DEFAULT_PRESETS = {"xdog": "portrait"}
 """An effect's default preset; the first one it declares for the others."""
 
@@ -168,6 +174,8 @@ class AdaptiveSettings:
     size: int = 256
     test_share: float = 0.2
     seed: int = 0
+    min_change: float = MIN_CHANGE
+    """Least mean absolute difference of a target from the preset's rendering (0: keep all)."""
 
     def resolve(self) -> tuple[Task, Effect, str, Change]:
         """Check the settings; the task, the effect, the preset's name and the change."""
@@ -181,6 +189,8 @@ class AdaptiveSettings:
                 raise WiseError(f"the {name} must be a whole number of at least {low}, got {value!r}")
         if not 0.0 < self.test_share < 1.0:
             raise WiseError(f"the test share must be above 0 and below 1, got {self.test_share}")
+        if not 0.0 <= self.min_change < 1.0:
+            raise WiseError(f"the least change must be from 0 to below 1, got {self.min_change}")
         return task, effect, preset, change
 
 
@@ -297,12 +307,14 @@ def region_masks(effect: Effect, preset: str, change: Change, soft: torch.Tensor
 
 def make_pair(effect: Effect, task: Task, preset: str, change: Change, crop: torch.Tensor) -> dict[str, torch.Tensor]:
     """The target, soft region and masks of a crop ``(1, 3, H, W)``: ``target`` ``(1, 3, H, W)``,
-    ``soft`` ``(1, 1, H, W)``, ``masks`` ``(1, P, H, W)``."""
+    ``soft`` ``(1, 1, H, W)``, ``masks`` ``(1, P, H, W)``, and ``change``: the mean absolute
+    difference of the target from the preset's rendering (a scalar)."""
     with torch.no_grad():
         soft = task.rule(crop)
         masks = region_masks(effect, preset, change, soft)
         target = effect(crop, masks).clamp(0.0, 1.0)
-    return {"target": target, "soft": soft, "masks": masks}
+        at_preset = effect(crop, effect.preset(preset)[None]).clamp(0.0, 1.0)
+    return {"target": target, "soft": soft, "masks": masks, "change": (target - at_preset).abs().mean()}
 
 
 def pair_paths(folder: Path, split: str, name: str) -> list[Path]:
@@ -353,6 +365,7 @@ def task_description(
         "count": sum(len(names) for names in made.values()),
         "seed": settings.seed,
         "test_share": settings.test_share,
+        "min_change": settings.min_change,
         "rule": task.description,
         "train_photos": sorted(set(made["train"])),
         "test_photos": sorted(set(made["test"])),
@@ -406,6 +419,20 @@ def write_pairs(
         raise
 
 
+def _visible_pair(
+    settings: AdaptiveSettings, effect: Effect, task: Task, preset: str, change: Change, photo: Photo, k: int
+) -> tuple[dict[str, torch.Tensor] | None, torch.Tensor]:
+    """Pair ``k`` of ``photo``: the first of :data:`ATTEMPTS` crops whose target differs from the
+    preset's rendering by at least ``settings.min_change`` (None when none does)."""
+    for attempt in range(ATTEMPTS):
+        key = (settings.seed, photo.name, k) if attempt == 0 else (settings.seed, photo.name, k, attempt)
+        crop = random_crop(photo.pixels, settings.size, int.from_bytes(_digest(*key), "little") >> 1)
+        pair = make_pair(effect, task, preset, change, crop)
+        if float(pair["change"]) >= settings.min_change:
+            return pair, crop
+    return None, crop
+
+
 def _write_all(
     root: Path,
     settings: AdaptiveSettings,
@@ -430,6 +457,7 @@ def _write_all(
     )
     pending: tuple[str, str, str, float] | None = None
     # the pair being written: split, photo, pair name and region share
+    left_out = 0
 
     def record(split: str, photo: str, name: str, share: float) -> None:
         made[split].append(photo)
@@ -440,9 +468,10 @@ def _write_all(
             for split, photo, k in schedule:
                 if interruption.received:
                     break
-                seed = int.from_bytes(_digest(settings.seed, photo.name, k), "little") >> 1
-                crop = random_crop(photo.pixels, settings.size, seed)
-                pair = make_pair(effect, task, preset, change, crop)
+                pair, crop = _visible_pair(settings, effect, task, preset, change, photo, k)
+                if pair is None:
+                    left_out += 1
+                    continue
                 pending = (split, photo.name, pair_name(photo, k), float(regions.region_share(pair["soft"])[0]))
                 _write_pair(root, split, pending[2], crop, pair, effect)
                 record(*pending)
@@ -460,11 +489,12 @@ def _write_all(
         **description,
         "pairs": {split: len(made[split]) for split in SPLITS},
         "mean_region": sum(shares) / len(shares) if shares else 0.0,
+        "left_out": left_out,
         "interrupted": interruption.received,
     }
     print(
         f"{summary['pairs']['train']} training and {summary['pairs']['test']} test pairs in {root}; "
-        f"mean region share {summary['mean_region']:.0%}",
+        f"mean region share {summary['mean_region']:.0%}; {left_out} left out where the change did not show",
         file=out,
         flush=True,
     )

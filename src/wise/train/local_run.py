@@ -26,7 +26,8 @@ from wise.train.pairs import Pair, PairDataset
 from wise.train.settings import CHECKPOINT, MODEL_FILE, REPORT_FILE, SETTINGS_FILE, is_launched_rank
 
 VALIDATION_PAIRS = 16
-"""Test pairs the validation loss is measured on (the first ones by name)."""
+"""Test pairs the validation loss is measured on, spread evenly over the test pairs (which come
+several to a photo)."""
 
 
 def _module(settings: LocalSettings) -> LocalGAN:
@@ -74,7 +75,9 @@ def train_local(
     train_pairs, test_pairs = pairs
     jitter = {"load_size": settings.load_size, "crop_size": settings.crop_size, "direction": settings.direction}
     train_set = PairDataset(train_pairs, flip=settings.flip, seed=settings.seed, **jitter)
-    test_set = PairDataset(test_pairs[:VALIDATION_PAIRS], None, None, flip=False, direction=settings.direction)
+    every = max(1, len(test_pairs) // VALIDATION_PAIRS)
+    shown = test_pairs[::every][:VALIDATION_PAIRS]
+    test_set = PairDataset(shown, None, None, flip=False, direction=settings.direction)
     data = PairData(train_set, test_set, settings.batch, workers=settings.workers)
     module = _module(settings)
     optimizers = 2 if module.discriminator is not None else 1
