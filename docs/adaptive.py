@@ -1,0 +1,85 @@
+"""The content-adaptive sheet (docs/adaptive.jpg): per task, a photo held out of training, the
+effect at its preset, the mask the local model paints for the task's parameter, and the
+photo rendered with the painted masks.
+
+Usage::
+
+    python docs/adaptive.py [-o docs/adaptive.jpg] [--model TASK=FILE ...]
+
+Without ``--model`` the built-in local models (``builtin:TASK``) are shown. The photos are
+``skimage.data`` pictures held out of training, at a 256-pixel short side (the models' own).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import torch
+from PIL import Image, ImageDraw, ImageFont
+from skimage import data
+
+import wise
+from wise.io import image_to_tensor, tensor_to_image
+from wise.optimize.report import heatmap
+from wise.ppn.predictor import LocalPredictor, at_short_side
+from wise.train.adaptive import TASKS, default_preset
+
+SHORT_SIDE = 256
+CELL = 220
+GAP = 6
+LABEL_HEIGHT = 22
+PHOTOS = {"contours": "coffee", "details": "chelsea", "background": "astronaut"}
+JPEG_QUALITY = 85
+
+
+def _cell(picture: Image.Image) -> Image.Image:
+    width = round(picture.width * CELL / picture.height)
+    return picture.resize((width, CELL), Image.Resampling.LANCZOS)
+
+
+def _row(task: str, model: str) -> list[tuple[str, Image.Image]]:
+    effect = wise.effects.create("xdog")
+    change = TASKS[task].change(effect.name)
+    preset = default_preset(effect)
+    photo = at_short_side(image_to_tensor(getattr(data, PHOTOS[task])()), SHORT_SIDE)
+    masks = LocalPredictor(model, effect.name)(photo)
+    index = effect.param_names.index(change.parameter)
+    spec = effect.param_specs[index]
+    real = spec.min + (masks[0, index] + 0.5) * (spec.max - spec.min)
+    with torch.no_grad():
+        at_preset = effect(photo, effect.preset(preset)[None])
+        adaptive = effect(photo, masks)
+    return [
+        (f"{task}: photo", Image.fromarray(tensor_to_image(photo))),
+        (f"preset {preset}", Image.fromarray(tensor_to_image(at_preset))),
+        (f"painted {change.parameter} [{spec.min:g}, {spec.max:g}]", Image.fromarray(heatmap(real, spec.min, spec.max))),
+        ("content-adaptive result", Image.fromarray(tensor_to_image(adaptive))),
+    ]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("-o", "--output", default=str(Path(__file__).with_name("adaptive.jpg")))
+    parser.add_argument("--model", action="append", default=[], metavar="TASK=FILE")
+    args = parser.parse_args()
+    models = dict(item.split("=", 1) for item in args.model) or {task: f"builtin:{task}" for task in PHOTOS}
+    rows = [_row(task, model) for task, model in models.items()]
+    cells = [[(label, _cell(picture)) for label, picture in row] for row in rows]
+    width = max(sum(p.width for _, p in row) + GAP * (len(row) - 1) for row in cells)
+    height = len(cells) * (CELL + LABEL_HEIGHT + GAP)
+    sheet = Image.new("RGB", (width, height), "white")
+    draw = ImageDraw.Draw(sheet)
+    font = ImageFont.load_default()
+    for r, row in enumerate(cells):
+        x, y = 0, r * (CELL + LABEL_HEIGHT + GAP)
+        for label, picture in row:
+            draw.text((x + 2, y + 4), label, fill="black", font=font)
+            sheet.paste(picture, (x, y + LABEL_HEIGHT))
+            x += picture.width + GAP
+    sheet.save(args.output, quality=JPEG_QUALITY)
+    print(args.output)
+
+
+if __name__ == "__main__":
+    main()
