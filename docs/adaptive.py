@@ -5,8 +5,10 @@ photo rendered with the painted masks.
 Usage::
 
     python docs/adaptive.py [-o docs/adaptive.jpg] [--model TASK=FILE ...]
+    python docs/adaptive.py -o ablation.jpg --task contours --model "L1=a.safetensors" --model "L1+TV=b.safetensors"
 
-Without ``--model`` the built-in local models (``builtin:TASK``) are shown. The photos are
+Without ``--model`` the built-in local models (``builtin:TASK``) are shown. With ``--task``,
+every row is a model of that task (labelled as given) on the same photo. The photos are
 ``skimage.data`` pictures held out of training, at a 256-pixel short side (the models' own).
 """
 
@@ -38,7 +40,7 @@ def _cell(picture: Image.Image) -> Image.Image:
     return picture.resize((width, CELL), Image.Resampling.LANCZOS)
 
 
-def _row(task: str, model: str) -> list[tuple[str, Image.Image]]:
+def _row(task: str, model: str, label: str) -> list[tuple[str, Image.Image]]:
     effect = wise.effects.create("xdog")
     change = TASKS[task].change(effect.name)
     preset = default_preset(effect)
@@ -51,9 +53,12 @@ def _row(task: str, model: str) -> list[tuple[str, Image.Image]]:
         at_preset = effect(photo, effect.preset(preset)[None])
         adaptive = effect(photo, masks)
     return [
-        (f"{task}: photo", Image.fromarray(tensor_to_image(photo))),
+        (f"{label}: photo", Image.fromarray(tensor_to_image(photo))),
         (f"preset {preset}", Image.fromarray(tensor_to_image(at_preset))),
-        (f"painted {change.parameter} [{spec.min:g}, {spec.max:g}]", Image.fromarray(heatmap(real, spec.min, spec.max))),
+        (
+            f"painted {change.parameter} [{spec.min:g}, {spec.max:g}]",
+            Image.fromarray(heatmap(real, spec.min, spec.max)),
+        ),
         ("content-adaptive result", Image.fromarray(tensor_to_image(adaptive))),
     ]
 
@@ -62,9 +67,10 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("-o", "--output", default=str(Path(__file__).with_name("adaptive.jpg")))
     parser.add_argument("--model", action="append", default=[], metavar="TASK=FILE")
+    parser.add_argument("--task", choices=tuple(PHOTOS), help="every model is of this task; --model LABEL=FILE")
     args = parser.parse_args()
     models = dict(item.split("=", 1) for item in args.model) or {task: f"builtin:{task}" for task in PHOTOS}
-    rows = [_row(task, model) for task, model in models.items()]
+    rows = [_row(args.task or name, model, name) for name, model in models.items()]
     cells = [[(label, _cell(picture)) for label, picture in row] for row in rows]
     width = max(sum(p.width for _, p in row) + GAP * (len(row) - 1) for row in cells)
     height = len(cells) * (CELL + LABEL_HEIGHT + GAP)
