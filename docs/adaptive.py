@@ -7,7 +7,7 @@ Usage::
     python docs/adaptive.py [-o docs/adaptive.jpg] [--model TASK=FILE ...]
     python docs/adaptive.py -o ablation.jpg --task contours --model "L1=a.safetensors" --model "L1+TV=b.safetensors"
 
-Without ``--model`` the built-in local models (``builtin:TASK``) are shown. With ``--task``,
+Without ``--model`` the built-in local models (``builtin:TASK``, those shipped) are shown. With ``--task``,
 every row is a model of that task (labelled as given) on the same photo. The photos are
 ``skimage.data`` pictures held out of training, at a 256-pixel short side (the models' own).
 """
@@ -22,8 +22,10 @@ from PIL import Image, ImageDraw, ImageFont
 from skimage import data
 
 import wise
+from wise.errors import WiseError
 from wise.io import image_to_tensor, tensor_to_image
 from wise.optimize.report import heatmap
+from wise.ppn.modelfile import builtin_model_path
 from wise.ppn.predictor import LocalPredictor, at_short_side
 from wise.train.adaptive import TASKS, default_preset
 
@@ -63,13 +65,22 @@ def _row(task: str, model: str, label: str) -> list[tuple[str, Image.Image]]:
     ]
 
 
+def _shipped(task: str) -> bool:
+    try:
+        builtin_model_path("xdog", task)
+    except WiseError:
+        return False
+    return True
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("-o", "--output", default=str(Path(__file__).with_name("adaptive.jpg")))
     parser.add_argument("--model", action="append", default=[], metavar="TASK=FILE")
     parser.add_argument("--task", choices=tuple(PHOTOS), help="every model is of this task; --model LABEL=FILE")
     args = parser.parse_args()
-    models = dict(item.split("=", 1) for item in args.model) or {task: f"builtin:{task}" for task in PHOTOS}
+    shipped = {task: f"builtin:{task}" for task in PHOTOS if _shipped(task)}
+    models = dict(item.split("=", 1) for item in args.model) or shipped
     rows = [_row(args.task or name, model, name) for name, model in models.items()]
     cells = [[(label, _cell(picture)) for label, picture in row] for row in rows]
     width = max(sum(p.width for _, p in row) + GAP * (len(row) - 1) for row in cells)

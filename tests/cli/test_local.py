@@ -136,3 +136,15 @@ def test_train_local_runs_on_two_ddp_processes(world: dict[str, Path], tmp_path:
     assert done.returncode == 0, done.stderr[-2000:]
     _, info = load_model(tmp_path / "run" / "model.safetensors", "xdog", "local")
     assert info.settings["processes"] == 2 and info.settings["steps_done"] == 2
+
+
+def test_the_built_in_contours_model_paints_without_a_download(world: dict[str, Path]) -> None:
+    out = world["root"] / "builtin"
+    code, printed = _run(
+        ["predict", "xdog", "--model", "builtin:contours", "--content", str(world["photo"]), "-o", str(out)]
+    )
+    assert code == 0 and "builtin:contours" in printed
+    scores = json.loads((out / "metrics.json").read_text())
+    assert scores["model"] == "builtin:contours" and scores["kind"] == "local"
+    code, _ = _run(["predict", "xdog", "--model", "builtin:chin", "--content", str(world["photo"]), "-o", str(out)])
+    assert code == 2
