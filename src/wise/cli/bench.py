@@ -15,8 +15,7 @@ from wise.optimize.benchmark import INIT_PPN, parse_init, recover
 from wise.optimize.refine import DEFAULT_BUDGET
 from wise.optimize.trials import photos_in
 from wise.ppn.modelfile import model_info, resolve_model
-from wise.train.evaluate import bench_folder, bench_pairs, read_pairs
-from wise.train.local_settings import read_task
+from wise.train.evaluate import bench_pairs, pairs_task, read_pairs
 
 IMAGE_LOSSES = ("l1", "l2")
 """The losses the crop iterations take."""
@@ -68,7 +67,7 @@ def _pairs_effect(args: argparse.Namespace) -> str:
         return effects.create(args.effect).name
     if not str(args.model).startswith("builtin:"):
         return model_info(args.model).effect
-    task_effect = read_task(bench_folder(args.pairs).parent).get("effect") or read_task(args.pairs).get("effect")
+    task_effect = pairs_task(args.pairs).get("effect")
     if task_effect is None:
         raise WiseError(f"--model {args.model}: name the effect of the built-in model with --effect")
     return str(task_effect)

@@ -40,9 +40,11 @@ def bench_folder(folder: str | Path) -> Path:
     return path / "test"
 
 
-def _task(folder: Path) -> dict:
-    """The task of the pairs (``task.json`` beside the split folder or in it)."""
-    for place in (folder, folder.parent):
+def pairs_task(folder: str | Path) -> dict:
+    """The task of the pairs of :func:`bench_folder` (``task.json`` in the split folder or beside
+    it; {} without one)."""
+    split = bench_folder(folder)
+    for place in (split, split.parent):
         if (place / TASK_FILE).is_file():
             return read_task(place)
     return {}
@@ -53,7 +55,7 @@ def read_pairs(folder: str | Path) -> tuple[list[Pair], dict]:
     split = bench_folder(folder)
     pairs = pairs_in(split)
     check_pairs(pairs)
-    return pairs, _task(split)
+    return pairs, pairs_task(folder)
 
 
 def baseline_params(effect: Effect, task: dict, settings: dict) -> tuple[torch.Tensor, str]:
