@@ -1,18 +1,21 @@
-"""Pieces every training command shares: stopping on Ctrl-C with a checkpoint, examples per
-second, the numbered CSV log parts of a resumable run, and the precision of the device."""
+"""Pieces every training command shares: the fit itself (:func:`fit_run`), stopping on Ctrl-C
+with a checkpoint, examples per second, the numbered CSV log parts of a resumable run, and the
+precision of the device."""
 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import TextIO
 
 import lightning as L
 import torch
 from lightning.pytorch.callbacks import Callback
 from lightning.pytorch.loggers import CSVLogger
 
-from wise.interrupt import CtrlC
-from wise.train.settings import LOGS
+from wise.interrupt import CtrlC, ctrl_c
+from wise.train.settings import CHECKPOINT, LOGS
 
 
 class Stopper(Callback):
@@ -102,3 +105,40 @@ def trainer_options(
         "val_check_interval": min(per_process, settings.checkpoint_every),  # type: ignore[attr-defined]
         "num_sanity_val_steps": 0,
     }
+
+
+def fit_run(
+    module: L.LightningModule,
+    data: L.LightningDataModule,
+    folder: Path,
+    make_trainer: Callable[[list[Callback]], L.Trainer],
+    write_results: Callable[[dict], None],
+    batch: int,
+    checkpoint_every: int,
+    resume: bool,
+    out: TextIO,
+    optimizers: int = 1,
+) -> dict:
+    """Fit ``module`` (from the run's checkpoint when ``resume``), keep the checkpoint, and let
+    process 0 ``write_results(summary)``; Ctrl-C stops at the next step and the results are
+    still written. The summary: training steps, processes, ``interrupted`` and examples per
+    second (:class:`Throughput`). ``make_trainer`` gets the callbacks the trainer must run."""
+    checkpoint = folder / CHECKPOINT
+    with ctrl_c(out) as interruption:
+        interruption.hold()
+        throughput = Throughput(batch)
+        trainer = make_trainer([Stopper(interruption, checkpoint, checkpoint_every, optimizers), throughput])
+        trainer.fit(
+            module, datamodule=data, ckpt_path=checkpoint if resume else None, weights_only=True if resume else None
+        )
+        trainer.save_checkpoint(checkpoint, weights_only=False)
+        summary = {
+            "steps": trainer.global_step // optimizers,
+            "processes": trainer.world_size,
+            "interrupted": interruption.received,
+            **throughput.rates(trainer.world_size),
+        }
+        if trainer.is_global_zero:
+            write_results(summary)
+    summary["interrupted"] = summary["interrupted"] or interruption.received
+    return summary

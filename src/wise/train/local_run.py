@@ -15,15 +15,14 @@ from typing import TextIO
 
 import lightning as L
 
-from wise.interrupt import ctrl_c
 from wise.io import atomic_path
 from wise.ppn.modelfile import ModelInfo, save_model
-from wise.train.engine import Stopper, Throughput, log_files, trainer_options
+from wise.train.engine import fit_run, log_files, trainer_options
 from wise.train.local import LocalGAN, PairData
 from wise.train.local_report import write_local_report
 from wise.train.local_settings import LocalSettings, prepare_local, read_task, start_params
 from wise.train.pairs import Pair, PairDataset
-from wise.train.settings import CHECKPOINT, MODEL_FILE, REPORT_FILE, SETTINGS_FILE, is_launched_rank
+from wise.train.settings import MODEL_FILE, REPORT_FILE, SETTINGS_FILE, is_launched_rank
 
 VALIDATION_PAIRS = 16
 """Test pairs the validation loss is measured on, spread evenly over the test pairs (which come
@@ -43,6 +42,7 @@ def _module(settings: LocalSettings) -> LocalGAN:
         lr_schedule=settings.lr_schedule,
         discriminator_width=settings.discriminator_width,
         anneal=settings.anneal,
+        soft_gradients=settings.soft_gradients,
     )
 
 
@@ -85,25 +85,19 @@ def train_local(
     if not is_launched_rank():
         with atomic_path(folder / SETTINGS_FILE) as path:
             Path(path).write_text(json.dumps(dataclasses.asdict(settings), indent=2) + "\n")
-    with ctrl_c(out) as interruption:
-        interruption.hold()
-        throughput = Throughput(settings.batch)
-        stopper = Stopper(interruption, folder / CHECKPOINT, settings.checkpoint_every, optimizers)
-        batches = max(1, len(train_set) // settings.batch)
-        trainer = _trainer(settings, folder, [stopper, throughput], batches, optimizers)
-        checkpoint = folder / CHECKPOINT if resume else None
-        trainer.fit(module, datamodule=data, ckpt_path=checkpoint, weights_only=True if checkpoint else None)
-        trainer.save_checkpoint(folder / CHECKPOINT, weights_only=False)
-        summary = {
-            "steps": trainer.global_step // optimizers,
-            "processes": trainer.world_size,
-            "interrupted": interruption.received,
-            **throughput.rates(trainer.world_size),
-        }
-        if trainer.is_global_zero:
-            _write_results(settings, folder, module, test_set, summary, out)
-    summary["interrupted"] = summary["interrupted"] or interruption.received
-    return summary
+    batches = max(1, len(train_set) // settings.batch)
+    return fit_run(
+        module,
+        data,
+        folder,
+        lambda callbacks: _trainer(settings, folder, callbacks, batches, optimizers),
+        lambda summary: _write_results(settings, folder, module, test_set, summary, out),
+        settings.batch,
+        settings.checkpoint_every,
+        resume,
+        out,
+        optimizers,
+    )
 
 
 def _write_results(

@@ -19,15 +19,13 @@ import torch
 from lightning.pytorch.callbacks import Callback
 
 from wise.errors import WiseError
-from wise.interrupt import ctrl_c
 from wise.io import atomic_path
 from wise.ppn.modelfile import ModelInfo, save_model
 from wise.train.data import ExampleDataset
-from wise.train.engine import Stopper, Throughput, log_files, trainer_options
+from wise.train.engine import fit_run, log_files, trainer_options
 from wise.train.module import ExampleData, GlobalPPN
 from wise.train.report import write_training_report
 from wise.train.settings import (
-    CHECKPOINT,
     MODEL_FILE,
     REPORT_FILE,
     SETTINGS_FILE,
@@ -93,6 +91,7 @@ def train_global(
         settings.lr,
         settings.size,
         anneal=settings.anneal,
+        soft_gradients=settings.soft_gradients,
         lr_schedule=settings.lr_schedule,
     )
     if settings.backbone_weights is not None:
@@ -101,25 +100,17 @@ def train_global(
     if not is_launched_rank():
         with atomic_path(folder / SETTINGS_FILE) as path:
             Path(path).write_text(json.dumps(dataclasses.asdict(settings), indent=2) + "\n")
-    with ctrl_c(out) as interruption:
-        interruption.hold()
-        throughput = Throughput(settings.batch)
-        trainer = _trainer(
-            settings, folder, [Stopper(interruption, folder / CHECKPOINT, settings.checkpoint_every), throughput]
-        )
-        checkpoint = folder / CHECKPOINT if resume else None
-        trainer.fit(module, datamodule=data, ckpt_path=checkpoint, weights_only=True if checkpoint else None)
-        trainer.save_checkpoint(folder / CHECKPOINT, weights_only=False)
-        summary = {
-            "steps": trainer.global_step,
-            "processes": trainer.world_size,
-            "interrupted": interruption.received,
-            **throughput.rates(trainer.world_size),
-        }
-        if trainer.is_global_zero:
-            _write_results(settings, folder, module, (train_set, validation_set), summary, out)
-    summary["interrupted"] = summary["interrupted"] or interruption.received
-    return summary
+    return fit_run(
+        module,
+        data,
+        folder,
+        lambda callbacks: _trainer(settings, folder, callbacks),
+        lambda summary: _write_results(settings, folder, module, (train_set, validation_set), summary, out),
+        settings.batch,
+        settings.checkpoint_every,
+        resume,
+        out,
+    )
 
 
 def _write_results(
