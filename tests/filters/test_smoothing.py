@@ -1,4 +1,5 @@
-"""The step temperature: the look unchanged at 0, gradients far from the target when raised."""
+"""The step temperature: the look unchanged at 0, gradients far from the target when raised;
+softened gradients: the look unchanged, gradients on the flat side of the threshold."""
 
 from __future__ import annotations
 
@@ -10,7 +11,13 @@ import torch
 from wise.errors import WiseError
 from wise.filters.dog import xdog_threshold
 from wise.filters.quantize import quantize
-from wise.filters.smoothing import annealed_temperature, smoothed_steps, step_temperature
+from wise.filters.smoothing import (
+    annealed_temperature,
+    gradient_softness,
+    smoothed_steps,
+    softened_gradients,
+    step_temperature,
+)
 
 
 def _ramp_image() -> torch.Tensor:
@@ -79,3 +86,27 @@ def test_annealing_falls_from_the_start_to_zero_and_stays_sharp_at_the_end() -> 
     assert all(v == 0.0 for v in values[75:]) and values[74] > 0.0
     assert annealed_temperature(0.0, 0.1) == 0.0
     assert annealed_temperature(1.0, 0.2, sharp_share=0.5) == pytest.approx((1 - 0.4) ** 2)
+
+
+def test_softened_gradients_keep_the_look_and_reach_the_white_side_of_the_threshold() -> None:
+    # pixels just above epsilon are white and the exact step is flat there: a target that wants
+    # them black gives epsilon no gradient unless the gradient is softened
+    image = torch.linspace(0.32, 0.4, 256, dtype=torch.float64).view(1, 1, 16, 16)
+    target = torch.zeros_like(image)
+    rendered, gradients = {}, {}
+    for softness in (0.0, 0.8):
+        epsilon = torch.tensor([0.3], dtype=torch.float64, requires_grad=True)
+        with softened_gradients(softness):
+            assert gradient_softness() == softness
+            rendered[softness] = xdog_threshold(image, epsilon, 1000.0)
+        (rendered[softness] - target).abs().mean().backward()
+        assert epsilon.grad is not None
+        gradients[softness] = float(epsilon.grad)
+    assert gradient_softness() == 0.0
+    assert torch.equal(rendered[0.8], rendered[0.0]) and bool((rendered[0.0] == 1.0).all())
+    assert gradients[0.0] == 0.0
+    assert gradients[0.8] < -1e-2  # descent raises epsilon over the pixels, which turns them black
+    for bad in (-0.1, 1.5, float("nan")):
+        with pytest.raises(WiseError, match="softness"):
+            with softened_gradients(bad):
+                pass

@@ -42,7 +42,7 @@ def _check_accelerator(name: str) -> None:
 
 def _engine_settings(args: argparse.Namespace) -> dict:
     """The settings of the options both kinds of training share (:func:`_add_engine`, ``--anneal``)."""
-    names = ("anneal", "workers", "accelerator", "devices", "num_nodes", "seed", "half", "checkpoint_every")
+    names = ("anneal", "soft_gradients", "workers", "accelerator", "devices", "num_nodes", "seed", "half", "checkpoint_every")
     return {name: getattr(args, name) for name in names}
 
 
@@ -172,6 +172,14 @@ def _add_anneal(parser: argparse.ArgumentParser) -> None:
         metavar="T",
         help="smooth the effect's steps (XDoG threshold, quantization) at temperature T (0-1) at first, "
         "sharpening them by the middle of the run (default 0: never)",
+    )
+    parser.add_argument(
+        "--soft-gradients",
+        type=types.share,
+        default=0.0,
+        metavar="S",
+        help="render the effect's steps exactly but pass their gradients through a ramp widened by S (0-1), "
+        "so that pixels on the flat side of the XDoG threshold still move the masks (default 0: exact gradients)",
     )
 
 

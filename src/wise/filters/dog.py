@@ -11,7 +11,7 @@ from wise.filters._checks import ParamLike, as_map, check_image, max_value
 from wise.filters.flow import flow_filter_inputs, pixel_step, spaced_samples, trace_streamlines
 from wise.filters.gaussian import SUPPORT, in_support
 from wise.filters.sampling import offset_grid, sample, sample_at_grid, sample_backward, sum_to, tap_sum
-from wise.filters.smoothing import step_temperature
+from wise.filters.smoothing import gradient_softness, step_temperature
 from wise.filters.structure import gradient_direction
 
 WIDE_TO_NARROW = 1.6
@@ -191,7 +191,10 @@ def xdog_threshold(image: torch.Tensor, epsilon: ParamLike, sharpness: ParamLike
     Under a step temperature ``t > 0`` (:func:`wise.filters.smoothing.smoothed_steps`) the
     ramp is ``10 ** (SOFTENING_DECADES * t)`` times wider and the corner at ``epsilon`` is rounded
     by a smooth minimum of width ``CORNER_WIDTH * t``, so that pixels far from the threshold
-    still pass gradients to ``epsilon``; at 0 it is the threshold above, exactly.
+    still pass gradients to ``epsilon``; at 0 it is the threshold above, exactly. Under a
+    gradient softness ``s > 0`` (:func:`wise.filters.smoothing.softened_gradients`) it renders
+    as at ``s = 0`` and backward differentiates ``tanh`` of a ramp ``10 ** (SOFTENING_DECADES * s)``
+    times wider through ``epsilon`` instead.
 
     Args:
         image: ``(B, C, H, W)`` DoG response.
@@ -203,13 +206,25 @@ def xdog_threshold(image: torch.Tensor, epsilon: ParamLike, sharpness: ParamLike
     """
     check_image(image)
     eps = as_map(epsilon, image, "epsilon")
-    temperature = step_temperature()
+    phi = as_map(sharpness, image, "sharpness")
+    softness = gradient_softness()
+    if softness <= 0.0:
+        return _threshold(image, eps, phi, step_temperature())
+    with torch.no_grad():
+        rendered = _threshold(image, eps, phi, step_temperature())
+    # straight through: the value rendered, the gradient of a ramp through the threshold
+    # that reaches both sides of it (the white side of the exact step is flat)
+    surrogate = torch.tanh(phi * 10.0 ** (-SOFTENING_DECADES * softness) * (image - eps))
+    return surrogate + (rendered - surrogate).detach()
+
+
+def _threshold(image: torch.Tensor, eps: torch.Tensor, phi: torch.Tensor, temperature: float) -> torch.Tensor:
     if temperature > 0.0:
-        phi = as_map(sharpness, image, "sharpness") * 10.0 ** (-SOFTENING_DECADES * temperature)
+        phi = phi * 10.0 ** (-SOFTENING_DECADES * temperature)
         width = CORNER_WIDTH * temperature
         # smooth minimum of 1 + tanh(z) and 1, 1 - w softplus(-tanh(z) / w), shifted by
         # w softplus(-1 / w) so that it spans [0, 1] like the threshold
         shift = width * math.log1p(math.exp(-1.0 / width))
         return (1.0 + shift) - width * F.softplus(-torch.tanh(phi * (image - eps)) / width)
-    ramp = 1.0 + torch.tanh(as_map(sharpness, image, "sharpness") * (image - eps))
+    ramp = 1.0 + torch.tanh(phi * (image - eps))
     return torch.where(image >= eps, torch.ones_like(ramp), ramp)

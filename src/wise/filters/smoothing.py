@@ -7,6 +7,12 @@ non-convexity (Blake & Zisserman 1987) starts the optimization on a smoothed ver
 steps and sharpens them as it goes. The temperature is not a parameter of the look: at 0,
 the default, every step is exactly the filter it was; optimization and training raise it
 for the forward and backward passes they run, inside :func:`smoothed_steps`.
+
+Smoothing changes the picture that is compared with the target. A surrogate gradient
+(straight-through estimator, Bengio et al. 2013) leaves it alone: inside
+:func:`softened_gradients` the steps render exactly, but backward differentiates a wider ramp
+in their place, so pixels on the wrong side of a threshold, which the exact step leaves flat,
+still tell the parameters which way to move.
 """
 
 from __future__ import annotations
@@ -19,6 +25,7 @@ from contextvars import ContextVar
 from wise.errors import WiseError
 
 _TEMPERATURE: ContextVar[float] = ContextVar("step_temperature", default=0.0)
+_GRADIENT_SOFTNESS: ContextVar[float] = ContextVar("gradient_softness", default=0.0)
 
 
 def step_temperature() -> float:
@@ -40,6 +47,24 @@ def smoothed_steps(temperature: float) -> Iterator[None]:
         yield
     finally:
         _TEMPERATURE.reset(token)
+
+
+def gradient_softness() -> float:
+    """The softness of the steps' surrogate gradients in force here: 0 (their own) to 1 (smoothest)."""
+    return _GRADIENT_SOFTNESS.get()
+
+
+@contextmanager
+def softened_gradients(softness: float) -> Iterator[None]:
+    """Render the steps exactly but differentiate them as ramps widened by ``softness`` (0 to 1,
+    on the scale of the step temperature); 0 keeps their own gradients."""
+    if not (isinstance(softness, (int, float)) and math.isfinite(softness) and 0.0 <= softness <= 1.0):
+        raise WiseError(f"the gradient softness must be from 0 to 1, got {softness!r}")
+    token = _GRADIENT_SOFTNESS.set(float(softness))
+    try:
+        yield
+    finally:
+        _GRADIENT_SOFTNESS.reset(token)
 
 
 def annealed_temperature(start: float, progress: float, sharp_share: float = 0.25) -> float:

@@ -16,7 +16,7 @@ import torch
 from torch.utils.data import DataLoader
 
 from wise import effects, ppn
-from wise.filters.smoothing import annealed_temperature, smoothed_steps
+from wise.filters.smoothing import annealed_temperature, smoothed_steps, softened_gradients
 from wise.train.discriminator import PatchDiscriminator, adversarial_loss
 from wise.train.losses import total_variation
 from wise.train.pairs import PairDataset
@@ -33,7 +33,9 @@ class LocalGAN(L.LightningModule):
 
     ``start`` is the ``(P,)`` normalized parameters the untrained network paints everywhere
     (e.g. the preset the targets depart from). ``anneal`` > 0 smooths the effect's steps in
-    the training steps, from that temperature to 0 over the first half of the run.
+    the training steps, from that temperature to 0 over the first half of the run;
+    ``soft_gradients`` > 0 renders them exactly but passes surrogate gradients through them
+    (:func:`wise.filters.smoothing.softened_gradients`).
     """
 
     def __init__(
@@ -49,6 +51,7 @@ class LocalGAN(L.LightningModule):
         lr_schedule: str = "linear",
         discriminator_width: int = 64,
         anneal: float = 0.0,
+        soft_gradients: float = 0.0,
     ) -> None:
         super().__init__()
         self.save_hyperparameters()
@@ -59,6 +62,7 @@ class LocalGAN(L.LightningModule):
         )
         self.discriminator = PatchDiscriminator(discriminator_width) if gan_weight > 0 else None
         self.gan_loss, self.lr, self.lr_schedule, self.anneal = gan_loss, lr, lr_schedule, anneal
+        self.soft_gradients = soft_gradients
         self.weights = {"gan": gan_weight, "l1": l1_weight, "tv": tv_weight}
 
     def forward(self, photo: torch.Tensor) -> torch.Tensor:
@@ -98,7 +102,7 @@ class LocalGAN(L.LightningModule):
             optimizers if isinstance(optimizers, list) else (optimizers, None)
         )
         photo, target = batch["photo"], batch["target"]
-        with smoothed_steps(self.temperature()):
+        with smoothed_steps(self.temperature()), softened_gradients(self.soft_gradients):
             masks, made = self.generate(batch)
             if self.discriminator is not None and discriminator_optimizer is not None:
                 real = self.discriminator(photo, target)

@@ -52,6 +52,7 @@ class LocalSettings:
     flip: bool = True
     direction: str = "AtoB"
     anneal: float = 0.0
+    soft_gradients: float = 0.0
     workers: int = 0
     accelerator: str = "auto"
     devices: int = 1
@@ -74,6 +75,9 @@ class LocalSettings:
                 raise WiseError(f"{flag} {getattr(self, name)} must not be negative")
         if self.gan_weight == 0 and self.l1_weight == 0:
             raise WiseError("--gan-weight and --l1-weight are both 0: nothing would be learned; raise one of them")
+        for name in ("anneal", "soft_gradients"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise WiseError(f"--{name.replace('_', '-')} {getattr(self, name)} must be from 0 to 1")
         if self.crop_size > self.load_size:
             raise WiseError(f"--crop-size {self.crop_size} is larger than --load-size {self.load_size}")
 

@@ -10,7 +10,7 @@ from torch.utils.data import DataLoader
 
 from wise import effects, ppn
 from wise.filters._checks import REFERENCE_SHORT_SIDE
-from wise.filters.smoothing import annealed_temperature, smoothed_steps
+from wise.filters.smoothing import annealed_temperature, smoothed_steps, softened_gradients
 from wise.train.data import ExampleDataset
 from wise.train.losses import prediction_loss
 from wise.train.sampler import GlobalBatchSampler
@@ -33,6 +33,7 @@ class GlobalPPN(L.LightningModule):
     ``anneal`` > 0 smooths the effect's steps in the training steps of image-space losses,
     from that temperature down to 0 over the first half of the run (graduated non-convexity,
     :mod:`wise.filters.smoothing`); validation always measures the look itself.
+    ``soft_gradients`` > 0 keeps the look but passes surrogate gradients through the steps.
     """
 
     def __init__(
@@ -44,10 +45,11 @@ class GlobalPPN(L.LightningModule):
         size: int,
         anneal: float = 0.0,
         lr_schedule: str = "constant",
+        soft_gradients: float = 0.0,
     ) -> None:
         super().__init__()
         self.save_hyperparameters()
-        self.anneal, self.lr_schedule = anneal, lr_schedule
+        self.anneal, self.lr_schedule, self.soft_gradients = anneal, lr_schedule, soft_gradients
         self.effect = effects.create(effect).requires_grad_(False)
         self.network = ppn.create(architecture, len(self.effect.param_specs))
         self.loss_kind, self.lr = loss, lr
@@ -75,7 +77,7 @@ class GlobalPPN(L.LightningModule):
         return annealed_temperature(self.anneal, self.global_step / total, sharp_share=ANNEALED_SHARE)
 
     def training_step(self, batch: dict[str, torch.Tensor], batch_index: int) -> torch.Tensor:
-        with smoothed_steps(self.temperature()):
+        with smoothed_steps(self.temperature()), softened_gradients(self.soft_gradients):
             loss, param_l1 = self._losses(batch)
         self.log("train_loss", loss, prog_bar=True, on_step=True, on_epoch=False)
         self.log("train_param_l1", param_l1, on_step=True, on_epoch=False)

@@ -59,6 +59,8 @@ class TrainSettings:
     """Share of the training examples on dead-leaves pictures instead of photos."""
     augmentation: bool = False
     anneal: float = 0.0
+    soft_gradients: float = 0.0
+    """Surrogate-gradient softness of the effect's steps (:func:`wise.filters.smoothing.softened_gradients`)."""
     """Step temperature of the first training step, lowered to 0 by the middle of the run."""
     workers: int = 0
     """Processes that render the examples of a fresh stream while the steps run."""
@@ -94,8 +96,9 @@ class TrainSettings:
             raise WiseError(f"unknown sampling {self.sampling!r}; use one of {', '.join(SAMPLINGS)}")
         if not 0.0 <= self.procedural <= 1.0:
             raise WiseError(f"the procedural share must be in [0, 1], got {self.procedural}")
-        if not 0.0 <= self.anneal <= 1.0:
-            raise WiseError(f"--anneal {self.anneal} must be from 0 to 1")
+        for name in ("anneal", "soft_gradients"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise WiseError(f"--{name.replace('_', '-')} {getattr(self, name)} must be from 0 to 1")
         if self.lr_schedule not in ("constant", "cosine"):
             raise WiseError(f"unknown learning-rate schedule {self.lr_schedule!r}; use constant or cosine")
         if self.workers and not self.fresh:
