@@ -27,7 +27,7 @@ from wise.io import image_to_tensor, tensor_to_image
 from wise.optimize.report import heatmap
 from wise.ppn.modelfile import builtin_model_path
 from wise.ppn.predictor import LocalPredictor, at_short_side
-from wise.train.adaptive import TASKS, default_preset
+from wise.train.adaptive import TASKS, task_preset
 
 SHORT_SIDE = 256
 CELL = 220
@@ -45,7 +45,7 @@ def _cell(picture: Image.Image) -> Image.Image:
 def _row(task: str, model: str, label: str) -> list[tuple[str, Image.Image]]:
     effect = wise.effects.create("xdog")
     change = TASKS[task].change(effect.name)
-    preset = default_preset(effect)
+    preset = task_preset(TASKS[task], effect)
     photo = at_short_side(image_to_tensor(getattr(data, PHOTOS[task])()), SHORT_SIDE)
     masks = LocalPredictor(model, effect.name)(photo)
     index = effect.param_names.index(change.parameter)

@@ -85,7 +85,10 @@ def register(commands: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--effect", default="xdog", metavar="EFFECT", help="effect name (default xdog)")
     parser.add_argument(
-        "--preset", metavar="NAME", help="preset of the other parameters (default: portrait for xdog, else the first)"
+        "--preset",
+        metavar="NAME",
+        help="preset of the other parameters (default: the task's own, the half-toned pencil and sketch "
+        "for details and background of xdog, else portrait for xdog and the first preset of other effects)",
     )
     parser.add_argument(
         "--count",

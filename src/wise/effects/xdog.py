@@ -54,6 +54,16 @@ class XDoG(Effect):
             "blackness": 0.15,
             "shading": 0.0,
         },
+        "pencil": {
+            "brightness": 0.1,
+            "contrast": 1.15,
+            "saturation": 1.02,
+            "details": 2.27,
+            "stroke_width": 0.54,
+            "contour": 1.0,
+            "blackness": 0.15,
+            "shading": 0.5,
+        },
         "sketch": {
             "brightness": 0.2,
             "contrast": 1.0,

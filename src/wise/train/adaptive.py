@@ -75,10 +75,12 @@ DEFAULT_PRESETS = {"xdog": "portrait"}
 
 @dataclass(frozen=True)
 class Change:
-    """The parameter a task changes for one effect and its real value inside the region."""
+    """The parameter a task changes for one effect, its real value inside the region, and the
+    preset of the other parameters when it is not the effect's default (:func:`task_preset`)."""
 
     parameter: str
     inside: float
+    preset: str | None = None
 
 
 @dataclass(frozen=True)
@@ -124,8 +126,10 @@ TASKS: dict[str, Task] = {
             "the region is where fine texture (the luminance minus a slight blur) makes up much of the local "
             "luminance energy compared with the rest of the photo, as on grass, bark or fur",
             {
-                # near the coarsest reachable abstraction: texture turns into a few blobs and strokes
-                "xdog": Change("details", 0.3),
+                # near the coarsest reachable abstraction: texture turns into a few blobs and strokes;
+                # half-toned, so that the abstraction shows in the tones of the whole region, not
+                # only where lines cross it
+                "xdog": Change("details", 0.3, preset="pencil"),
                 "cartoon": Change("details", 0.3),
             },
         ),
@@ -136,8 +140,9 @@ TASKS: dict[str, Task] = {
             "(Lab distance from the photo's mean colour), sharpness and a centre prior are high, holes filled",
             {
                 # a brighter input fades most lines and black areas of the drawing away (a lower contour
-                # alone leaves the black areas, which grow)
-                "xdog": Change("brightness", 0.45),
+                # alone leaves the black areas, which grow); half-toned, so that the whole background
+                # pales, not only its lines
+                "xdog": Change("brightness", 0.45, preset="sketch"),
                 # no outlines: the background turns into soft colour areas
                 "cartoon": Change("contour", 0.2),
             },
@@ -150,6 +155,12 @@ def task_named(name: str) -> Task:
     if name not in TASKS:
         raise WiseError(f"unknown task {name!r}; tasks: {', '.join(TASKS)}")
     return TASKS[name]
+
+
+def task_preset(task: Task, effect: Effect) -> str:
+    """The preset a task starts from: its change's own for ``effect``, else :func:`default_preset`."""
+    own = task.change(effect.name).preset
+    return own if own is not None else default_preset(effect)
 
 
 def default_preset(effect: Effect) -> str:
@@ -169,7 +180,7 @@ class AdaptiveSettings:
     task: str
     effect: str = "xdog"
     preset: str | None = None
-    """None: :func:`default_preset`."""
+    """None: :func:`task_preset`."""
     count: int = 200
     size: int = 256
     test_share: float = 0.2
@@ -182,7 +193,7 @@ class AdaptiveSettings:
         task = task_named(self.task)
         effect = effects.create(self.effect)
         change = task.change(effect.name)
-        preset = self.preset if self.preset is not None else default_preset(effect)
+        preset = self.preset if self.preset is not None else task_preset(task, effect)
         effect.preset(preset)
         for name, value, low in (("count", self.count, 2), ("size", self.size, 8)):
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
