@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import io
 import json
-from contextlib import redirect_stdout
 from pathlib import Path
 
 import numpy as np
@@ -12,21 +11,14 @@ import pytest
 import torch
 from PIL import Image
 
+from tests.cli.helpers import run_in_process
 from tests.images import astronaut_png, xdog_pairs
 from wise import effects, ppn
-from wise.cli import main
 from wise.editor.server import initial_session
 from wise.ppn.modelfile import ModelInfo, load_model, save_model
 from wise.train.evaluate import region_iou
 
 NETWORK = {"depth": 3, "width": 8, "max_width": 16}
-
-
-def _run(argv: list[str]) -> tuple[int, str]:
-    out = io.StringIO()
-    with redirect_stdout(out):
-        code = main(argv)
-    return code, out.getvalue()
 
 
 @pytest.fixture(scope="module")
@@ -49,7 +41,7 @@ def world(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 
 def test_predict_paints_masks_that_apply_and_the_editor_render_to_the_same_pixels(world: dict[str, Path]) -> None:
     out = world["root"] / "painted"
-    code, printed = _run(
+    code, printed = run_in_process(
         ["predict", "xdog", "--content", str(world["photo"]), "-o", str(out), "--model", str(world["model"])]
     )
     assert code == 0 and "masks painted" in printed
@@ -60,7 +52,7 @@ def test_predict_paints_masks_that_apply_and_the_editor_render_to_the_same_pixel
     assert result.shape == (100, 150, 3)
     sheet = Image.open(out / "masks.png")
     assert sheet.width > 4 * 64 and sheet.mode == "RGB"
-    code, _ = _run(
+    code, _ = run_in_process(
         ["apply", "xdog", str(world["photo"]), "-o", str(world["root"] / "applied.png"),
          "--params", str(out / "params.safetensors")]
     )  # fmt: skip
@@ -75,7 +67,7 @@ def test_predict_paints_masks_that_apply_and_the_editor_render_to_the_same_pixel
 
 def test_bench_pairs_measures_the_model_against_the_preset(world: dict[str, Path]) -> None:
     report = world["root"] / "pairs.json"
-    code, printed = _run(["bench", "pairs", "--model", str(world["model"]), "--pairs", str(world["pairs"]),
+    code, printed = run_in_process(["bench", "pairs", "--model", str(world["model"]), "--pairs", str(world["pairs"]),
                           "--json", str(report)])  # fmt: skip
     assert code == 0 and "2 pairs" in printed and "region IoU" in printed
     result = json.loads(report.read_text())
@@ -103,15 +95,15 @@ def test_region_iou_compares_where_the_mask_departs_with_the_true_region() -> No
     assert region_iou(masks, region, xdog, {}) is None
 
 
-def test_train_local_runs_resumes_and_writes_its_run(world: dict[str, Path], tmp_path: Path) -> None:
+def test_train_local_runs_resumes_and_writes_itsrun_in_process(world: dict[str, Path], tmp_path: Path) -> None:
     run = tmp_path / "run"
     common = ["train", "local", "xdog", "--pairs", str(world["pairs"]), "-o", str(run), "--depth", "3", "--width",
               "8", "--max-width", "16", "--discriminator-width", "8", "--load-size", "64", "--crop-size", "48",
               "--accelerator", "cpu", "--checkpoint-every", "2"]  # fmt: skip
-    code, printed = _run([*common, "--steps", "3"])
+    code, printed = run_in_process([*common, "--steps", "3"])
     assert code == 0 and "3 steps" in printed
     assert {"model.safetensors", "report.html", "settings.json"} <= {p.name for p in run.iterdir()}
-    code, printed = _run([*common, "--steps", "5", "--resume"])
+    code, printed = run_in_process([*common, "--steps", "5", "--resume"])
     assert code == 0, printed
     _, info = load_model(run / "model.safetensors", "xdog", "local")
     assert info.settings["steps_done"] == 5 and info.settings["task"] == "dark" and info.size == 64
@@ -140,11 +132,13 @@ def test_train_local_runs_on_two_ddp_processes(world: dict[str, Path], tmp_path:
 
 def test_the_built_in_contours_model_paints_without_a_download(world: dict[str, Path]) -> None:
     out = world["root"] / "builtin"
-    code, printed = _run(
+    code, printed = run_in_process(
         ["predict", "xdog", "--model", "builtin:contours", "--content", str(world["photo"]), "-o", str(out)]
     )
     assert code == 0 and "builtin:contours" in printed
     scores = json.loads((out / "metrics.json").read_text())
     assert scores["model"] == "builtin:contours" and scores["kind"] == "local"
-    code, _ = _run(["predict", "xdog", "--model", "builtin:chin", "--content", str(world["photo"]), "-o", str(out)])
+    code, _ = run_in_process(
+        ["predict", "xdog", "--model", "builtin:chin", "--content", str(world["photo"]), "-o", str(out)]
+    )
     assert code == 2

@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-import io
 import json
 import os
 import subprocess
 import sys
 import time
-from contextlib import redirect_stdout
 from pathlib import Path
 
 import numpy as np
@@ -18,8 +16,8 @@ from PIL import Image
 from skimage import data
 
 import wise
+from tests.cli.helpers import run_in_process
 from wise import ppn
-from wise.cli import main
 from wise.io import read_image
 from wise.optimize.trials import content_at, random_reference
 from wise.ppn.modelfile import ModelInfo, save_model
@@ -30,13 +28,6 @@ SRC = Path(wise.__file__).resolve().parent.parent
 
 def _env() -> dict[str, str]:
     return {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(SRC), os.environ.get("PYTHONPATH")]))}
-
-
-def _run(argv: list[str]) -> tuple[int, str]:
-    out = io.StringIO()
-    with redirect_stdout(out):
-        code = main(argv)
-    return code, out.getvalue()
 
 
 @pytest.fixture(scope="module")
@@ -61,7 +52,7 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 
 def test_predict_writes_parameters_that_apply_renders_to_the_same_pixels(files: dict[str, Path]) -> None:
     root = files["root"]
-    code, printed = _run(
+    code, printed = run_in_process(
         ["predict", "cartoon", "--content", str(root / "photo.png"), "--target", str(root / "example-large.png"),
          "-o", str(root / "out"), "--model", str(root / "cartoon-model.safetensors"), "--refine", "0"]
     )  # fmt: skip
@@ -70,7 +61,7 @@ def test_predict_writes_parameters_that_apply_renders_to_the_same_pixels(files: 
     assert {"ssim", "psnr", "l1", "seconds", "model", "network"} <= scores.keys() and scores["seconds"] < 1.0
     assert "refinement" not in scores and not (root / "out" / "predicted.safetensors").exists()
     assert 0.0 < scores["ssim"] <= 1.0 and scores["model"].endswith("cartoon-model.safetensors")
-    code, _ = _run(
+    code, _ = run_in_process(
         ["apply", "cartoon", str(root / "photo.png"), "-o", str(root / "applied.png"),
          "--params", str(root / "out" / "params.safetensors")]
     )  # fmt: skip
@@ -83,7 +74,7 @@ def test_predict_writes_parameters_that_apply_renders_to_the_same_pixels(files: 
 def test_predict_refines_from_the_prediction_within_its_budget(files: dict[str, Path]) -> None:
     root = files["root"]
     began = time.perf_counter()
-    code, printed = _run(
+    code, printed = run_in_process(
         ["predict", "cartoon", "--content", str(root / "photo.png"), "--target", str(root / "example.png"),
          "-o", str(root / "refined"), "--model", str(root / "cartoon-model.safetensors"), "--budget", "4"]
     )  # fmt: skip
@@ -103,7 +94,7 @@ def test_predict_refines_from_the_prediction_within_its_budget(files: dict[str, 
 
 def test_predict_refinement_can_be_capped_in_iterations(files: dict[str, Path]) -> None:
     root = files["root"]
-    code, _ = _run(
+    code, _ = run_in_process(
         ["predict", "cartoon", "--content", str(root / "photo.png"), "--target", str(root / "example.png"),
          "-o", str(root / "capped"), "--model", str(root / "cartoon-model.safetensors"), "--refine", "6"]
     )  # fmt: skip
@@ -114,7 +105,7 @@ def test_predict_refinement_can_be_capped_in_iterations(files: dict[str, Path]) 
 
 def test_bench_ppn_reports_means_and_trials(files: dict[str, Path]) -> None:
     root = files["root"]
-    code, printed = _run(
+    code, printed = run_in_process(
         ["bench", "ppn", "cartoon", "--images", str(root / "photos"),
          "--model", str(root / "cartoon-model.safetensors"), "--trials", "3", "--size", "64",
          "--json", str(root / "ppn.json")]
@@ -132,7 +123,7 @@ def test_bench_ppn_reports_means_and_trials(files: dict[str, Path]) -> None:
 
 def test_bench_ppn_measures_the_refined_prediction_too(files: dict[str, Path]) -> None:
     root = files["root"]
-    code, printed = _run(
+    code, printed = run_in_process(
         ["bench", "ppn", "cartoon", "--images", str(root / "photos"),
          "--model", str(root / "cartoon-model.safetensors"), "--trials", "2", "--size", "64",
          "--refine", "1", "--json", str(root / "refined.json")]
@@ -148,7 +139,7 @@ def test_bench_ppn_measures_the_refined_prediction_too(files: dict[str, Path]) -
 def test_recover_starts_from_the_prediction(files: dict[str, Path]) -> None:
     root = files["root"]
     model = root / "cartoon-model.safetensors"
-    code, _ = _run(
+    code, _ = run_in_process(
         ["bench", "recover", "cartoon", "--images", str(root / "photos"), "--trials", "1", "--size", "32",
          "--iters", "2", "--lr", "1e-9", "--init", f"ppn:{model}", "--json", str(root / "recover.json")]
     )  # fmt: skip
