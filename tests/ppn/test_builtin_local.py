@@ -9,10 +9,14 @@ from skimage import data
 import wise
 from wise.io import image_to_tensor
 from wise.ppn.modelfile import builtin_model_path
-from wise.ppn.predictor import LocalPredictor
+from wise.ppn.predictor import LocalPredictor, at_short_side
 from wise.train.adaptive import TASKS, preset_value, task_preset
 
-SHIPPED = ("contours", "background")
+SHIPPED = ("contours", "details", "background")
+PHOTOS = {"contours": "coffee", "details": "chelsea", "background": "astronaut"}
+"""A photo held out of every model's training per task."""
+SIDE = 256
+"""The models' working size."""
 BORDER = 0.2
 """Share of the picture's side counted as its border."""
 
@@ -46,3 +50,16 @@ def test_the_background_model_brightens_the_border_more_than_the_subject() -> No
     change = task.change("xdog")
     at_preset = preset_value(effect, task_preset(task, effect), change.parameter)
     assert float(border.mean()) > float(centre.mean()) + 0.25 * (change.inside - at_preset)
+
+
+@pytest.mark.parametrize("task", SHIPPED)
+def test_a_shipped_model_departs_from_the_preset_inside_its_rules_region_more_than_outside(task: str) -> None:
+    photo = at_short_side(image_to_tensor(getattr(data, PHOTOS[task])()), SIDE)
+    painted = _painted(task, photo)
+    region = TASKS[task].rule(photo)[0, 0] > 0.5
+    effect = wise.effects.create("xdog")
+    change = TASKS[task].change("xdog")
+    at_preset = preset_value(effect, task_preset(TASKS[task], effect), change.parameter)
+    departure = (painted - at_preset) / (change.inside - at_preset)  # 0 at the preset, 1 at the task's value
+    assert region.any() and (~region).any()
+    assert float(departure[region].mean()) > float(departure[~region].mean()) + 0.2, task
