@@ -249,7 +249,9 @@ CASES: dict[str, Case] = {
     "train local: negative --tv-weight": Case(LOCAL + " --tv-weight -1", "--tv-weight: must be at least 0"),
     "train local: unknown --start": Case(LOCAL + " --start noir", "no preset 'noir'"),
     "train local: --depth 1": Case(LOCAL + " --depth 1", "--depth: must be from 2"),
-    "train local: --soft-gradients above 1": Case(LOCAL + " --soft-gradients 1.5", "--soft-gradients: must be at most 1"),
+    "train local: --soft-gradients above 1": Case(
+        LOCAL + " --soft-gradients 1.5", "--soft-gradients: must be at most 1"
+    ),
     "train local: folder holds a run": Case(LOCAL.replace("local-run", "old-run"), "pass --resume"),
     "predict: local model with --target": Case(
         PAINT + " {root}/xdog-local.safetensors --target {root}/target.png", "leave out --target"

@@ -42,7 +42,17 @@ def _check_accelerator(name: str) -> None:
 
 def _engine_settings(args: argparse.Namespace) -> dict:
     """The settings of the options both kinds of training share (:func:`_add_engine`, ``--anneal``)."""
-    names = ("anneal", "soft_gradients", "workers", "accelerator", "devices", "num_nodes", "seed", "half", "checkpoint_every")
+    names = (
+        "anneal",
+        "soft_gradients",
+        "workers",
+        "accelerator",
+        "devices",
+        "num_nodes",
+        "seed",
+        "half",
+        "checkpoint_every",
+    )
     return {name: getattr(args, name) for name in names}
 
 
