@@ -18,6 +18,18 @@ from wise.effects.common import (
 from wise.filters import adjust_color, oriented_bilateral, rgb_to_lab
 from wise.params import ParamSpec
 
+_PORTRAIT = {
+    "brightness": 0.1,
+    "contrast": 1.15,
+    "saturation": 1.02,
+    "details": 2.27,
+    "stroke_width": 0.54,
+    "contour": 1.0,
+    "blackness": 0.15,
+    "shading": 0.0,
+}
+"""The reference implementation's portrait preset; ``pencil`` draws the same lines over half tones."""
+
 
 class XDoG(Effect):
     """Black-and-white line drawing: flow-aligned abstraction followed by flow-based XDoG.
@@ -44,26 +56,8 @@ class XDoG(Effect):
         ParamSpec("shading", 0.0, 1.0, 0.5, "grey tones of the abstracted image under the lines (0: lines on white)"),
     )
     presets = {
-        "portrait": {
-            "brightness": 0.1,
-            "contrast": 1.15,
-            "saturation": 1.02,
-            "details": 2.27,
-            "stroke_width": 0.54,
-            "contour": 1.0,
-            "blackness": 0.15,
-            "shading": 0.0,
-        },
-        "pencil": {
-            "brightness": 0.1,
-            "contrast": 1.15,
-            "saturation": 1.02,
-            "details": 2.27,
-            "stroke_width": 0.54,
-            "contour": 1.0,
-            "blackness": 0.15,
-            "shading": 0.5,
-        },
+        "portrait": _PORTRAIT,
+        "pencil": {**_PORTRAIT, "shading": 0.5},
         "sketch": {
             "brightness": 0.2,
             "contrast": 1.0,

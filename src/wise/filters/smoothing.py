@@ -28,6 +28,18 @@ _TEMPERATURE: ContextVar[float] = ContextVar("step_temperature", default=0.0)
 _GRADIENT_SOFTNESS: ContextVar[float] = ContextVar("gradient_softness", default=0.0)
 
 
+@contextmanager
+def _within(variable: ContextVar[float], value: float, name: str) -> Iterator[None]:
+    """``variable`` set to ``value`` (checked to be from 0 to 1) for the block."""
+    if not (isinstance(value, (int, float)) and math.isfinite(value) and 0.0 <= value <= 1.0):
+        raise WiseError(f"{name} must be from 0 to 1, got {value!r}")
+    token = variable.set(float(value))
+    try:
+        yield
+    finally:
+        variable.reset(token)
+
+
 def step_temperature() -> float:
     """The temperature of the steps in force here: 0 (sharp, the look itself) to 1 (smoothest)."""
     return _TEMPERATURE.get()
@@ -40,13 +52,8 @@ def smoothed_steps(temperature: float) -> Iterator[None]:
     Stages recomputed during backward run under the context of their forward pass, so a
     backward after the block still sees the temperature the forward pass had.
     """
-    if not (isinstance(temperature, (int, float)) and math.isfinite(temperature) and 0.0 <= temperature <= 1.0):
-        raise WiseError(f"the step temperature must be from 0 to 1, got {temperature!r}")
-    token = _TEMPERATURE.set(float(temperature))
-    try:
+    with _within(_TEMPERATURE, temperature, "the step temperature"):
         yield
-    finally:
-        _TEMPERATURE.reset(token)
 
 
 def gradient_softness() -> float:
@@ -58,13 +65,8 @@ def gradient_softness() -> float:
 def softened_gradients(softness: float) -> Iterator[None]:
     """Render the steps exactly but differentiate them as ramps widened by ``softness`` (0 to 1,
     on the scale of the step temperature); 0 keeps their own gradients."""
-    if not (isinstance(softness, (int, float)) and math.isfinite(softness) and 0.0 <= softness <= 1.0):
-        raise WiseError(f"the gradient softness must be from 0 to 1, got {softness!r}")
-    token = _GRADIENT_SOFTNESS.set(float(softness))
-    try:
+    with _within(_GRADIENT_SOFTNESS, softness, "the gradient softness"):
         yield
-    finally:
-        _GRADIENT_SOFTNESS.reset(token)
 
 
 def annealed_temperature(start: float, progress: float, sharp_share: float = 0.25) -> float:
