@@ -62,3 +62,39 @@ def xdog_pairs(root: Path, size: int = 64, parameter: str = "shading", inside: f
     }
     (root / "task.json").write_text(json.dumps(task))
     return root
+
+
+def drawing_pairs(root: Path, size: int = 64, layout: str = "separate") -> Path:
+    """A paired set of :data:`PAIR_PHOTOS` and the synthetic artist's drawings of them
+    (:func:`wise.train.drawing.draw`), four for training and two for testing. ``layout``:
+    ``separate`` (``root/<split>/{A,B}``) or ``apdrawing`` (APDrawingDB as distributed:
+    ``root/data/<split>/<name>.png`` with photo and drawing side by side, and the unused
+    ``landmark/`` and ``mask/`` folders)."""
+    import numpy as np
+    import torch
+
+    from wise.train.drawing import draw
+
+    for number, name in enumerate(PAIR_PHOTOS):
+        split = "train" if number < 4 else "test"
+        picture = getattr(data, name)()
+        if picture.ndim == 2:
+            picture = np.stack([picture] * 3, axis=-1)
+        photo = Image.fromarray(picture[..., :3]).resize((size, size), Image.Resampling.BILINEAR)
+        tensor = torch.from_numpy(np.asarray(photo).copy()).permute(2, 0, 1)[None] / 255.0
+        drawing = Image.fromarray((draw(tensor)[0].permute(1, 2, 0).numpy() * 255.0).round().astype(np.uint8))
+        if layout == "separate":
+            for folder, image in (("A", photo), ("B", drawing)):
+                (root / split / folder).mkdir(parents=True, exist_ok=True)
+                image.save(root / split / folder / f"{name}.png")
+        else:
+            (root / "data" / split).mkdir(parents=True, exist_ok=True)
+            side_by_side = Image.new("RGB", (2 * size, size))
+            side_by_side.paste(photo, (0, 0))
+            side_by_side.paste(drawing, (size, 0))
+            side_by_side.save(root / "data" / split / f"{name}.png")
+    if layout == "apdrawing":
+        for folder in ("landmark/ALL", "mask/ALL"):
+            (root / folder).mkdir(parents=True, exist_ok=True)
+        (root / "landmark" / "ALL" / "astronaut.txt").write_text("10 10\n")
+    return root

@@ -1,6 +1,4 @@
-import json
 import os
-import struct
 from pathlib import Path
 
 import pytest
@@ -8,9 +6,9 @@ import torch
 from safetensors.torch import save_file
 
 import wise.files
+from tests.weights import sparse_weights
 from wise.cli import main
 from wise.errors import WiseError
-from wise.files import DTYPE_BYTES
 from wise.io import write_image
 from wise.vgg import StyleLoss, VGG19Features, expected_shapes, load_vgg19, weights_file
 
@@ -71,20 +69,6 @@ def test_transfer_by_gatys_with_user_weights(weights: Path, tmp_path: Path, caps
     assert (out / "target.png").exists()
     assert main([*base, "-o", str(tmp_path / "n"), "--vgg-weights", str(tmp_path / "none.safetensors")]) == 2
     assert "VGG-19 weights not found" in capsys.readouterr().err and not (tmp_path / "n").exists()
-
-
-def sparse_weights(path: Path, shapes: dict[str, tuple[int, ...]], dtype: str = "F32") -> Path:
-    """A safetensors file with these tensor shapes whose data is a hole (written without the bytes)."""
-    header, offset = {}, 0
-    for key, shape in shapes.items():
-        size = DTYPE_BYTES[dtype] * int(torch.Size(shape).numel())
-        header[key] = {"dtype": dtype, "shape": list(shape), "data_offsets": [offset, offset + size]}
-        offset += size
-    text = json.dumps(header).encode()
-    with path.open("wb") as f:
-        f.write(struct.pack("<Q", len(text)) + text)
-        f.truncate(8 + len(text) + offset)
-    return path
 
 
 @pytest.fixture

@@ -29,6 +29,8 @@ from wise.render import render
 RESULT_FILES = ("params.safetensors", "result.png", "metrics.json")
 MASKS_FILE = "masks.png"
 """A local model's masks, each as a heat map over its parameter's range."""
+STAGE_FILE = "stage.png"
+"""A translator's effect stage: the effect's output before its CNN."""
 PREDICTED_FILE = "predicted.safetensors"
 """With refinement: the network's own prediction, which the refinement started from."""
 
@@ -138,8 +140,10 @@ def predict_local_files(
     them at full resolution, and write :data:`RESULT_FILES` and :data:`MASKS_FILE` into
     ``out_dir`` (the masks at the model's working size: ``wise apply --params`` and the
     editor enlarge them to any picture). Returns the metrics."""
-    effect = effects.create(effect_name)
     predictor = LocalPredictor(model, effect_name, device)
+    if predictor.translates:
+        return predict_translation_files(predictor, content_path, out_dir, out)
+    effect = effects.create(effect_name)
     content = read_image(content_path)
     began = time.perf_counter()
     masks = predictor(content)
@@ -168,6 +172,40 @@ def predict_local_files(
         f"masks: {folder / MASKS_FILE}",
         file=out,
     )
+    return scores
+
+
+def predict_translation_files(predictor: LocalPredictor, content_path: str, out_dir: str, out: TextIO) -> dict:
+    """A translator's files (:mod:`wise.ppn.translation`), at its working size: ``result.png``
+    (the final image), :data:`STAGE_FILE` (the effect stage) and, with an effect,
+    ``params.safetensors`` (masks, or the preset it runs at) and :data:`MASKS_FILE` (painted
+    masks); ``wise apply --model`` re-runs effect and CNN on edited masks."""
+    content = read_image(content_path)
+    began = time.perf_counter()
+    made = predictor.stages(content)
+    seconds = time.perf_counter() - began
+    effect = predictor.effect
+    scores = {
+        "effect": predictor.info.effect,
+        "model": predictor.info.source,
+        "kind": "local",
+        "architecture": predictor.info.architecture,
+        "network": predictor.info.network,
+        "working_size": predictor.info.size,
+        "result_size": list(made.result.shape[-2:]),
+        "seconds": round(seconds, 4),
+    }
+    folder = Path(out_dir)
+    folder.mkdir(parents=True, exist_ok=True)
+    if effect is not None:
+        save_params(folder / RESULT_FILES[0], effect, made.masks)
+        write_image(made.stage.clamp(0.0, 1.0), folder / STAGE_FILE)
+        if made.masks.dim() == 4:
+            with atomic_path(folder / MASKS_FILE) as tmp:
+                mask_sheet(made.masks, effect.param_specs).save(tmp, format="PNG")
+    write_image(made.result, folder / RESULT_FILES[1])
+    _write_json(folder / RESULT_FILES[2], scores)
+    print(f"translated in {seconds:.2f} s with {predictor.info.source}; result: {folder / RESULT_FILES[1]}", file=out)
     return scores
 
 

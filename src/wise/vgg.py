@@ -15,7 +15,8 @@ import torch.nn.functional as F
 from torch import nn
 
 from wise.errors import WiseError
-from wise.files import MAX_MODEL_BYTES, read_safetensors, read_safetensors_header, safetensors_path
+from wise.files import MAX_MODEL_BYTES, read_safetensors, safetensors_path
+from wise.pretrained import WeightsKind, check_header
 
 DEFAULT_WEIGHTS = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "wise" / "vgg19.safetensors"
 CHANNELS = (
@@ -47,8 +48,14 @@ IMAGENET_STD = (0.229, 0.224, 0.225)
 STYLE_WEIGHT = 1e3
 """Weight of the Gram-matrix style term against the content term."""
 WHAT = "VGG-19 weights"
-FLOAT_DTYPES = ("F16", "BF16", "F32", "F64")
 PASS_WEIGHTS = "pass --vgg-weights FILE (a safetensors file of torchvision's vgg19 state dict)"
+VGG19 = WeightsKind(
+    what=WHAT,
+    origin="torchvision's vgg19 state dict",
+    user="The neural style loss",
+    option="--vgg-weights",
+    network="a VGG-19 state dict",
+)
 
 
 def _layer_names() -> list[tuple[int, str]]:
@@ -122,21 +129,7 @@ def weights_file(path: str | os.PathLike[str] | None = None) -> Path:
     if not os.path.lexists(file):
         raise WiseError(f"VGG-19 weights not found at {file}; {PASS_WEIGHTS} or put that file at {DEFAULT_WEIGHTS}")
     safetensors_path(file, "VGG weights")
-    entries, _ = read_safetensors_header(file, WHAT, MAX_MODEL_BYTES)
-    shapes = expected_shapes()
-    missing = [key for key in shapes if key not in entries]
-    if missing:
-        more = " and more" if len(missing) > 3 else ""
-        raise WiseError(f"{file}: not a VGG-19 state dict; missing {', '.join(missing[:3])}{more}; {PASS_WEIGHTS}")
-    for key, shape in shapes.items():
-        entry = entries[key]
-        if entry.shape != shape:
-            raise WiseError(
-                f"{file}: weights of the wrong shape for VGG-19 ({key} is {list(entry.shape)}, "
-                f"expected {list(shape)}); {PASS_WEIGHTS}"
-            )
-        if entry.dtype not in FLOAT_DTYPES:
-            raise WiseError(f"{file}: VGG-19 weights must be floating point ({key} is {entry.dtype}); {PASS_WEIGHTS}")
+    check_header(file, expected_shapes(), VGG19)
     return file
 
 

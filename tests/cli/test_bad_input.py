@@ -252,6 +252,17 @@ CASES: dict[str, Case] = {
     "train local: --soft-gradients above 1": Case(
         LOCAL + " --soft-gradients 1.5", "--soft-gradients: must be at most 1"
     ),
+    "train local: --init of a missing file": Case(LOCAL + " --init nothing.safetensors", "nothing.safetensors"),
+    "train local: --init of an unknown built-in task": Case(LOCAL + " --init builtin:hair", "builtin:hair"),
+    "train local: no effect and no CNN": Case(
+        LOCAL.replace("local xdog", "local none"), "the effect 'none' trains a CNN alone"
+    ),
+    "train local: a preset and no CNN": Case(LOCAL + " --ppn preset", "nothing to learn"),
+    "train local: unknown --post": Case(LOCAL + " --post vgg", "--post: invalid choice"),
+    "train local: --init without a PPN": Case(
+        LOCAL + " --ppn preset --post unet --init {root}/xdog-local.safetensors", "--init starts the PPN"
+    ),
+    "train local: --post-width 0": Case(LOCAL + " --post unet --post-width 0", "--post-width: must be from 1"),
     "train local: folder holds a run": Case(LOCAL.replace("local-run", "old-run"), "pass --resume"),
     "predict: local model with --target": Case(
         PAINT + " {root}/xdog-local.safetensors --target {root}/target.png", "leave out --target"
@@ -270,6 +281,36 @@ CASES: dict[str, Case] = {
     ),
     "bench pairs: model of another effect": Case(
         PAIRS + " {root}/xdog-local.safetensors --effect cartoon", "a model for 'xdog'"
+    ),
+    "bench pairs: --fid with a missing weight file": Case(
+        PAIRS + " {root}/xdog-local.safetensors --fid --inception-weights {root}/nothing.safetensors",
+        "nothing.safetensors",
+    ),
+    "bench pairs: --fid with pickled weights": Case(
+        PAIRS + " {root}/xdog-local.safetensors --fid --inception-weights {root}/model.pth", "safetensors"
+    ),
+    "bench pairs: --lpips-weights without --lpips": Case(
+        PAIRS + " {root}/xdog-local.safetensors --lpips-weights {root}/xdog.safetensors", "add --lpips"
+    ),
+    "bench pairs: html page of another kind": Case(
+        PAIRS + " {root}/xdog-local.safetensors --html {root}/page.png", ".html"
+    ),
+    "apply: --model without a CNN": Case(
+        APPLY + " --params {root}/xdog.safetensors --model {root}/xdog-local.safetensors", "not a model with a CNN"
+    ),
+    "predict: a CNN alone without its model": Case(
+        "predict none --content {root}/photo.png -o {root}/pred", "pass its --model"
+    ),
+    "edit: --model without --params": Case(EDIT + " --model {root}/xdog-local.safetensors", "pass them with --params"),
+    "edit: --model without a CNN": Case(
+        EDIT + " --params {root}/xdog.safetensors --model {root}/xdog-local.safetensors", "not a model with a CNN"
+    ),
+    "data drawing: missing photo folder": Case(
+        "data drawing --images {root}/nope -o {root}/drawings", "not a directory of photos"
+    ),
+    "data drawing: --count 1": Case("data drawing --images {root}/photos -o {root}/drawings --count 1", "--count"),
+    "data drawing: output inside the photos": Case(
+        "data drawing --images {root}/photos -o {root}/photos/pairs", "inside the photo folder"
     ),
     "bench ppn: local model": Case(PPN + " {root}/xdog-local.safetensors", "a local model"),
     # bench ppn and recover --init ppn

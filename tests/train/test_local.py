@@ -58,7 +58,7 @@ def _l1(module: LocalGAN, dataset: PairDataset) -> float:
         for index in range(len(dataset)):
             item = dataset[index]
             batch = {"photo": item["photo"][None], "scale": item["scale"], "origin": item["origin"][None]}
-            _, made = module.generate(batch)
+            made = module.generate(batch).result
             losses.append(float((made[0] - item["target"]).abs().mean()))
     return sum(losses) / len(losses)
 
@@ -95,3 +95,32 @@ def test_pairs_of_another_effect_are_refused(pairs: Path, tmp_path: Path) -> Non
     with pytest.raises(WiseError, match="pairs of the 'xdog' effect"):
         prepare_local(LocalSettings("cartoon", str(pairs)), tmp_path / "run", resume=False)
     assert len(pair_files(pairs, "test")) == 2
+
+
+def test_init_starts_from_a_local_model_of_the_same_network(pairs: Path, tmp_path: Path) -> None:
+    from wise.errors import WiseError
+    from wise.ppn.modelfile import ModelInfo, save_model
+    from wise.train.local_run import _module
+
+    network_options = {"depth": 3, "width": 8, "max_width": 16}
+    xdog = effects.create("xdog")
+    donor = LocalGAN("xdog", xdog.preset("sketch").tolist(), network_options).generator
+    torch.manual_seed(1)
+    with torch.no_grad():
+        for weight in donor.parameters():
+            weight.add_(0.1 * torch.randn_like(weight))
+    info = ModelInfo("xdog", "unet", xdog.param_names, 64, 64, kind="local", network=network_options)
+    save_model(tmp_path / "donor.safetensors", donor, info)
+    settings = LocalSettings("xdog", str(pairs), init=str(tmp_path / "donor.safetensors"), **network_options)
+    started = _module(settings).generator
+    for name, value in donor.state_dict().items():
+        assert torch.equal(started.state_dict()[name], value), name
+    fresh = _module(LocalSettings("xdog", str(pairs), **network_options)).generator
+    assert not torch.equal(fresh.head.bias, donor.head.bias), "without --init the network starts anew"
+    wider = LocalSettings("xdog", str(pairs), init=settings.init, depth=3, width=16, max_width=16)
+    with pytest.raises(WiseError, match="depth 3, max width 16, width 8; give the same --depth"):
+        prepare_local(wider, tmp_path / "run", resume=False)
+    with pytest.raises(WiseError, match="a model for 'xdog', not 'cartoon'"):
+        from wise.train.local_settings import init_model
+
+        init_model(LocalSettings("cartoon", str(pairs), init=settings.init, **network_options))

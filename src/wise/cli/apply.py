@@ -18,6 +18,7 @@ from wise.errors import WiseError
 from wise.gallery import make_sheet
 from wise.io import WRITE_FORMATS, image_to_tensor, read_image, write_image
 from wise.paramfile import load_params
+from wise.ppn.predictor import LocalPredictor
 from wise.render import render
 
 
@@ -55,12 +56,30 @@ def run_apply(args: argparse.Namespace, out: TextIO) -> int:
     params = params.clone()
     for index, value in (parse_set(item, effect) for item in args.set):
         params[:, index] = value
-    output = output_file(args.output, {"image": args.input, "--params": args.params}, WRITE_FORMATS)
+    output = output_file(
+        args.output, {"image": args.input, "--params": args.params, "--model": args.model}, WRITE_FORMATS
+    )
     target_device = device(args.device)
+    translator = _translator(args, target_device)
     image = read_image(args.input)
-    result = render(effect.to(target_device).eval(), image, params, device=target_device)
+    if translator is not None:
+        result = translator.finish(image, params).result
+    else:
+        result = render(effect.to(target_device).eval(), image, params, device=target_device)
     write_image(result, output, quality=args.quality)
     return 0
+
+
+def _translator(args: argparse.Namespace, target_device: str) -> LocalPredictor | None:
+    """The model of ``--model``: a translator of the effect with a CNN after it."""
+    if args.model is None:
+        return None
+    predictor = LocalPredictor(args.model, args.effect, target_device)
+    if not predictor.translates or predictor.network.post is None:
+        raise WiseError(
+            f"--model {args.model}: not a model with a CNN after the effect; apply its masks with --params alone"
+        )
+    return predictor
 
 
 def run_gallery(args: argparse.Namespace, out: TextIO) -> int:
@@ -87,6 +106,12 @@ def register(commands: argparse._SubParsersAction) -> None:
     apply.add_argument("-o", "--output", required=True, metavar="OUTPUT", help="output image (.png, .jpg or .jpeg)")
     apply.add_argument("--preset", metavar="NAME", help="start from this preset instead of the defaults")
     apply.add_argument("--params", metavar="FILE", help="start from a parameter file (global or local masks)")
+    apply.add_argument(
+        "--model",
+        metavar="FILE",
+        help="a model of 'wise train local --post': run its CNN after the effect (at the model's working size), "
+        "e.g. on masks it painted and you edited",
+    )
     apply.add_argument(
         "--set",
         action="append",

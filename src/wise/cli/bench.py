@@ -11,11 +11,13 @@ from wise.cli import args as types
 from wise.cli.outputs import output_file
 from wise.cli.parser import add_device, add_pixel_limit, add_size, command, device, exit_code
 from wise.errors import WiseError
+from wise.fidelity import load_inception, load_lpips
 from wise.optimize.benchmark import INIT_PPN, parse_init, recover
 from wise.optimize.refine import DEFAULT_BUDGET
 from wise.optimize.trials import photos_in
 from wise.ppn.modelfile import model_info, resolve_model
-from wise.train.evaluate import bench_pairs, pairs_task, read_pairs
+from wise.ppn.translation import NO_EFFECT
+from wise.train.evaluate import PerceptualMetrics, bench_pairs, pairs_task, read_pairs
 
 IMAGE_LOSSES = ("l1", "l2")
 """The losses the crop iterations take."""
@@ -63,6 +65,8 @@ def run_ppn(args: argparse.Namespace, out: TextIO) -> int:
 
 def _pairs_effect(args: argparse.Namespace) -> str:
     """The effect of ``--model``: named by the file, else by ``--effect`` or the pairs' task."""
+    if args.effect == NO_EFFECT:
+        return NO_EFFECT
     if args.effect is not None:
         return effects.create(args.effect).name
     if not str(args.model).startswith("builtin:"):
@@ -73,13 +77,33 @@ def _pairs_effect(args: argparse.Namespace) -> str:
     return str(task_effect)
 
 
+def _perceptual(args: argparse.Namespace) -> PerceptualMetrics | None:
+    """The networks of ``--fid`` and ``--lpips``, loaded from the user's weight files (refused
+    before any work when a file is missing or wrong)."""
+    if (args.alexnet_weights or args.lpips_weights) and not args.lpips:
+        raise WiseError("--alexnet-weights and --lpips-weights are for --lpips; add --lpips")
+    if args.inception_weights and not args.fid:
+        raise WiseError("--inception-weights is for --fid; add --fid")
+    if not (args.fid or args.lpips):
+        return None
+    return PerceptualMetrics(
+        inception=load_inception(args.inception_weights) if args.fid else None,
+        lpips=load_lpips(args.alexnet_weights, args.lpips_weights) if args.lpips else None,
+    )
+
+
 def run_pairs(args: argparse.Namespace, out: TextIO) -> int:
     effect = _pairs_effect(args)
     path = resolve_model(args.model, effect, "local")
     pairs, _ = read_pairs(args.pairs)
     inputs = {f"pair {pair.name}": pair.photo for pair in pairs}
     output_file(args.json, {**inputs, "--model": path}, (".json",))
-    result = bench_pairs(args.model, effect, args.pairs, args.json, device(args.device), out)
+    if args.html is not None:
+        output_file(args.html, {**inputs, "--model": path, "--json": args.json}, (".html",))
+    perceptual = _perceptual(args)
+    result = bench_pairs(
+        args.model, effect, args.pairs, args.json, device(args.device), out, html_path=args.html, perceptual=perceptual
+    )
     return exit_code(result["interrupted"])
 
 
@@ -151,6 +175,26 @@ def register(commands: argparse._SubParsersAction) -> None:
         help="a folder with A/ and B/ (and regions/ for adaptive tasks), or a pairs folder (its test/ is measured)",
     )
     pairs_parser.add_argument("--json", required=True, metavar="OUT", help="write the results here (.json)")
+    pairs_parser.add_argument(
+        "--html",
+        metavar="PAGE",
+        help="also write a results page (.html): photo, effect stage, result, ground truth and masks of the first "
+        "pairs",
+    )
+    perceptual = pairs_parser.add_argument_group(
+        "perceptual metrics (weights are never downloaded: pass safetensors files or place them in ~/.cache/wise)"
+    )
+    perceptual.add_argument("--fid", action="store_true", help="FID of the results against the targets")
+    perceptual.add_argument(
+        "--inception-weights",
+        metavar="FILE",
+        help="pytorch-fid's Inception weights (pt_inception-2015-12-05) as safetensors",
+    )
+    perceptual.add_argument("--lpips", action="store_true", help="LPIPS (AlexNet, v0.1) of each result and target")
+    perceptual.add_argument("--alexnet-weights", metavar="FILE", help="torchvision's AlexNet weights as safetensors")
+    perceptual.add_argument(
+        "--lpips-weights", metavar="FILE", help="the LPIPS linear layers (alex.pth of lpips v0.1) as safetensors"
+    )
     pairs_parser.add_argument(
         "--effect", help="the effect of a built-in model (default: the pairs' task's); a model file names its own"
     )

@@ -1,5 +1,6 @@
-"""``wise data adaptive``: synthetic paired data sets for content-adaptive effects (the pairs
-``wise train local`` learns from and ``wise bench pairs`` measures)."""
+"""``wise data adaptive`` and ``wise data drawing``: synthetic paired data sets (the pairs
+``wise train local`` learns from and ``wise bench pairs`` measures), for content-adaptive effects
+and for image-to-image translation."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from wise.cli.outputs import OutputFolder
 from wise.cli.parser import add_pixel_limit, add_size, command, exit_code
 from wise.errors import WiseError, WiseWarning
 from wise.train.adaptive import MIN_CHANGE, SPLITS, TASKS, AdaptiveSettings, load_photos, write_pairs
+from wise.train.drawing_pairs import DESCRIPTION_FILE, DrawingSettings, write_drawing_pairs
 from wise.train.local_settings import TASK_FILE
 
 MAX_PAIRS = 1_000_000
@@ -22,7 +24,7 @@ DEFAULT_SIZE = 256
 """pix2pix's crop size."""
 
 
-def _check_folders(images: Path, output: Path) -> None:
+def _check_folders(images: Path, output: Path, description: str) -> None:
     """The output folder is neither the photo folder nor inside it nor around it (pairs written
     among the photos would be read as photos, photos among the pairs replaced), and holds no
     pairs already (a set mixed of two runs would describe neither)."""
@@ -31,7 +33,7 @@ def _check_folders(images: Path, output: Path) -> None:
         raise WiseError(f"{output}: inside the photo folder --images {images}; write the pairs elsewhere")
     if pairs in photos.parents:
         raise WiseError(f"{output}: holds the photo folder --images {images}; write the pairs elsewhere")
-    found = [name for name in (TASK_FILE, *SPLITS) if (output / name).exists()]
+    found = [name for name in (description, *SPLITS) if (output / name).exists()]
     if found:
         raise WiseError(
             f"{output}: holds pairs already ({', '.join(found)}); choose another folder or remove them first"
@@ -50,17 +52,32 @@ def run_adaptive(args: argparse.Namespace, out: TextIO) -> int:
         min_change=args.min_change,
     )
     settings.resolve()
+    folder, photos = _prepare(args, TASK_FILE, settings.size)
+    with folder.guard():
+        summary = write_pairs(args.output, settings, photos, out=out)
+    return exit_code(summary["interrupted"])
+
+
+def run_drawing(args: argparse.Namespace, out: TextIO) -> int:
+    settings = DrawingSettings(count=args.count, size=args.size, test_share=args.test_share, seed=args.seed)
+    settings.check()
+    folder, photos = _prepare(args, DESCRIPTION_FILE, settings.size)
+    with folder.guard():
+        summary = write_drawing_pairs(args.output, settings, photos, out=out)
+    return exit_code(summary["interrupted"])
+
+
+def _prepare(args: argparse.Namespace, description: str, size: int) -> tuple[OutputFolder, list]:
+    """The checked output folder and the readable photos of a pairs command."""
     images, output = Path(args.images), Path(args.output)
     if not images.is_dir():
         raise WiseError(f"--images {images}: not a directory of photos")
-    folder = OutputFolder(output, (TASK_FILE,), {"--images": args.images})
-    _check_folders(images, output)
-    photos, skipped = load_photos(images, settings.size)
+    folder = OutputFolder(output, (description,), {"--images": args.images})
+    _check_folders(images, output, description)
+    photos, skipped = load_photos(images, size)
     if skipped:
         warnings.warn(f"{images}: skipped {len(skipped)} unreadable or too small files", WiseWarning, stacklevel=2)
-    with folder.guard():
-        summary = write_pairs(output, settings, photos, out=out)
-    return exit_code(summary["interrupted"])
+    return folder, photos
 
 
 def register(commands: argparse._SubParsersAction) -> None:
@@ -73,16 +90,7 @@ def register(commands: argparse._SubParsersAction) -> None:
     )
     rules = "; ".join(f"{name}: {task.description}" for name, task in TASKS.items())
     parser.add_argument("task", choices=tuple(TASKS), metavar="TASK", help=f"{', '.join(TASKS)} ({rules})")
-    parser.add_argument(
-        "--images", required=True, metavar="DIR", help="folder of photos (searched recursively), at least 2"
-    )
-    parser.add_argument(
-        "-o",
-        "--output",
-        required=True,
-        metavar="PAIRS",
-        help="folder of the pairs: task.json and train/, test/ with A/, B/, regions/ and params/ (must hold no pairs)",
-    )
+    _add_photos(parser, "task.json and train/, test/ with A/, B/, regions/ and params/")
     parser.add_argument("--effect", default="xdog", metavar="EFFECT", help="effect name (default xdog)")
     parser.add_argument(
         "--preset",
@@ -90,6 +98,41 @@ def register(commands: argparse._SubParsersAction) -> None:
         help="preset of the other parameters (default: the task's own, the half-toned pencil and sketch "
         "for details and background of xdog, else portrait for xdog and the first preset of other effects)",
     )
+    _add_split(parser)
+    parser.add_argument(
+        "--min-change",
+        type=types.finite_float(0.0, 1.0, below=True),
+        default=MIN_CHANGE,
+        metavar="D",
+        help=f"leave out pairs whose target differs from the preset's rendering by less than D on average "
+        f"(after 4 crops of the photo tried; default {MIN_CHANGE:g}, 0: keep all)",
+    )
+    add_pixel_limit(parser)
+    parser.set_defaults(func=run_adaptive)
+
+    drawing = command(
+        kinds,
+        "drawing",
+        "make paired photos and drawings of a synthetic artist (thick outlines, hatching) that XDoG alone "
+        "cannot draw, for developing image-to-image translation",
+    )
+    _add_photos(drawing, "drawing.json and train/, test/ with A/ and B/")
+    _add_split(drawing)
+    add_pixel_limit(drawing)
+    drawing.set_defaults(func=run_drawing)
+
+
+def _add_photos(parser: argparse.ArgumentParser, layout: str) -> None:
+    parser.add_argument(
+        "--images", required=True, metavar="DIR", help="folder of photos (searched recursively), at least 2"
+    )
+    parser.add_argument(
+        "-o", "--output", required=True, metavar="PAIRS", help=f"folder of the pairs: {layout} (must hold no pairs)"
+    )
+
+
+def _add_split(parser: argparse.ArgumentParser) -> None:
+    """How many square pairs, how large, and how the photos are split."""
     parser.add_argument(
         "--count",
         type=types.whole_number(2, MAX_PAIRS),
@@ -109,13 +152,3 @@ def register(commands: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--seed", type=types.seed, default=0, help="seed of the split and the crops, 0 to 2**63-1 (default 0)"
     )
-    parser.add_argument(
-        "--min-change",
-        type=types.finite_float(0.0, 1.0, below=True),
-        default=MIN_CHANGE,
-        metavar="D",
-        help=f"leave out pairs whose target differs from the preset's rendering by less than D on average "
-        f"(after 4 crops of the photo tried; default {MIN_CHANGE:g}, 0: keep all)",
-    )
-    add_pixel_limit(parser)
-    parser.set_defaults(func=run_adaptive)

@@ -11,7 +11,7 @@ from wise.editor.server import LOOPBACK, initial_session, serve
 
 
 def run(args: argparse.Namespace, out: TextIO) -> int:
-    session = initial_session(args.image, args.params, args.effect, args.preset)
+    session = initial_session(args.image, args.params, args.effect, args.preset, args.model)
     serve(session, args.host, args.port, out)
     return 0
 
@@ -23,6 +23,12 @@ def register(commands: argparse._SubParsersAction) -> None:
     start.add_argument("--params", metavar="FILE", help="parameter file to edit (from wise optimize or the editor)")
     start.add_argument("--effect", metavar="EFFECT", help="start from this effect's global values")
     edit.add_argument("--preset", metavar="NAME", help="with --effect: start from this preset")
+    edit.add_argument(
+        "--model",
+        metavar="FILE",
+        help="with --params: a model of 'wise train local --post' whose CNN draws the result from the effect's "
+        "output (at the model's working size)",
+    )
     edit.add_argument(
         "--host",
         default=LOOPBACK,

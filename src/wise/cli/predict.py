@@ -14,18 +14,24 @@ from wise.errors import WiseError
 from wise.optimize.parametric import MODES
 from wise.optimize.refine import DEFAULT_BUDGET
 from wise.ppn.modelfile import model_info, model_path
-from wise.predict import MASKS_FILE, PREDICTED_FILE, RESULT_FILES, predict_files, predict_local_files
+from wise.ppn.translation import NO_EFFECT
+from wise.predict import MASKS_FILE, PREDICTED_FILE, RESULT_FILES, STAGE_FILE, predict_files, predict_local_files
 
 
 def run_predict(args: argparse.Namespace, out: TextIO) -> int:
-    effects.create(args.effect)
+    if args.effect == NO_EFFECT:
+        if args.model is None:
+            raise WiseError("the effect 'none' is a CNN alone: pass its --model (of 'wise train local none')")
+    else:
+        effects.create(args.effect)
     path = model_path(args.model, args.effect)
     kind = model_info(path, args.effect).kind
     model = None if args.model is None else str(path)
     if kind == "local":
         if args.target is not None:
             raise WiseError(f"{args.model}: a local model paints the masks from the photo alone; leave out --target")
-        folder = OutputFolder(args.output, (*RESULT_FILES, MASKS_FILE), {"--content": args.content, "--model": model})
+        files = (*RESULT_FILES, MASKS_FILE, STAGE_FILE)
+        folder = OutputFolder(args.output, files, {"--content": args.content, "--model": model})
         with folder.guard():
             scores = predict_local_files(
                 args.effect, args.content, args.output, args.model, device=device(args.device), out=out
@@ -58,7 +64,7 @@ def register(commands: argparse._SubParsersAction) -> None:
         "predict",
         "predict the global parameters that re-create an example, or paint parameter masks with a local model",
     )
-    parser.add_argument("effect", metavar="EFFECT", help="effect name (see 'wise effects')")
+    parser.add_argument("effect", metavar="EFFECT", help="effect name (see 'wise effects'); none for a CNN-only model")
     parser.add_argument("--content", required=True, metavar="IMAGE", help="the photo")
     parser.add_argument(
         "--target", metavar="IMAGE", help="the stylized example of it (global models; a local model takes none)"

@@ -19,6 +19,8 @@ from wise.cli.outputs import OutputFolder
 from wise.cli.parser import add_pixel_limit, command, exit_code
 from wise.errors import WiseError
 from wise.ppn import ARCHITECTURES
+from wise.ppn.postprocess import DEFAULT_WIDTH as POST_WIDTH
+from wise.ppn.translation import NO_EFFECT, NO_POST, POST_KINDS, PPN_KINDS
 from wise.train.data import MIXTURE_PRESET_SHARE, PROCEDURAL_SHARE, SAMPLINGS
 from wise.train.discriminator import GAN_LOSSES
 from wise.train.local_settings import DIRECTIONS, LocalSettings, prepare_local
@@ -109,7 +111,8 @@ def _quiet_lightning() -> None:
 
 
 def run_train_local(args: argparse.Namespace, out: TextIO) -> int:
-    effects.create(args.effect)
+    if args.effect != NO_EFFECT:
+        effects.create(args.effect)
     _check_accelerator(args.accelerator)
     if not Path(args.pairs).is_dir():
         raise WiseError(f"--pairs {args.pairs}: not a directory of pairs (train/ and test/)")
@@ -118,6 +121,7 @@ def run_train_local(args: argparse.Namespace, out: TextIO) -> int:
         effect=args.effect,
         pairs=args.pairs,
         start=args.start,
+        init=args.init,
         depth=args.depth,
         width=args.width,
         max_width=args.max_width,
@@ -126,6 +130,7 @@ def run_train_local(args: argparse.Namespace, out: TextIO) -> int:
         gan_weight=args.gan_weight,
         l1_weight=args.l1_weight,
         tv_weight=args.tv_weight,
+        preset_weight=args.preset_weight,
         lr=args.lr,
         lr_schedule=args.lr_schedule,
         batch=args.batch,
@@ -135,6 +140,10 @@ def run_train_local(args: argparse.Namespace, out: TextIO) -> int:
         crop_size=args.crop_size,
         flip=not args.no_flip,
         direction=args.direction,
+        post=args.post,
+        post_width=args.post_width,
+        ppn=args.ppn,
+        dropout=args.dropout,
         **_engine_settings(args),
     )
     pairs = prepare_local(settings, Path(args.output), args.resume)
@@ -197,7 +206,9 @@ def _register_local(kinds: argparse._SubParsersAction) -> None:
     parser = command(
         kinds, "local", "train a network that paints an effect's parameter masks from the photo (paired images)"
     )
-    parser.add_argument("effect", metavar="EFFECT", help="effect name (see 'wise effects')")
+    parser.add_argument(
+        "effect", metavar="EFFECT", help="effect name (see 'wise effects'), or none for a CNN alone (with --post)"
+    )
     parser.add_argument(
         "--pairs",
         required=True,
@@ -208,6 +219,11 @@ def _register_local(kinds: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--start", metavar="PRESET", help="preset the untrained network paints (default: the pairs' task preset)"
     )
+    parser.add_argument(
+        "--init",
+        metavar="MODEL",
+        help="start from the weights of a local model of the effect (file or builtin:TASK) to fine-tune it",
+    )
     network = parser.add_argument_group("networks")
     network.add_argument("--depth", type=types.whole_number(2, 9), default=6, help="U-Net levels (default 6)")
     network.add_argument(
@@ -217,13 +233,33 @@ def _register_local(kinds: argparse._SubParsersAction) -> None:
         "--max-width", type=types.whole_number(1, 1024), default=64, help="most channels of a level (64)"
     )
     network.add_argument(
+        "--ppn",
+        choices=PPN_KINDS,
+        default="local",
+        help="local: a U-Net paints the parameter masks (default); preset: the effect runs at the start preset",
+    )
+    network.add_argument(
+        "--post",
+        choices=POST_KINDS,
+        default=NO_POST,
+        help="CNN after the effect (image-to-image translation): resnet (Johnson et al.), unet (pix2pix); default none",
+    )
+    network.add_argument(
+        "--post-width",
+        type=types.whole_number(1, 512),
+        default=POST_WIDTH,
+        metavar="N",
+        help=f"channels of the CNN's first layer (pix2pix: {POST_WIDTH})",
+    )
+    network.add_argument("--dropout", action="store_true", help="pix2pix's dropout in the CNN while training")
+    network.add_argument(
         "--discriminator-width",
         type=types.whole_number(1, 512),
         default=64,
         metavar="N",
         help="channels of the PatchGAN's first layer (pix2pix: 64)",
     )
-    losses = parser.add_argument_group("loss: α·GAN + β·L1 + γ·TV(masks)")
+    losses = parser.add_argument_group("loss: α·GAN + β·L1 + γ·TV(masks) + δ·|masks - preset|")
     losses.add_argument("--gan-loss", choices=GAN_LOSSES, default="vanilla", help="GAN loss (default vanilla)")
     losses.add_argument(
         "--gan-weight", type=types.weight, default=1.0, metavar="α", help="0 trains without a discriminator (1)"
@@ -231,6 +267,13 @@ def _register_local(kinds: argparse._SubParsersAction) -> None:
     losses.add_argument("--l1-weight", type=types.weight, default=100.0, metavar="β", help="L1 to the targets (100)")
     losses.add_argument(
         "--tv-weight", type=types.weight, default=1.0, metavar="γ", help="total variation of the masks (1)"
+    )
+    losses.add_argument(
+        "--preset-weight",
+        type=types.weight,
+        default=0.0,
+        metavar="δ",
+        help="L1 of the masks to the start preset: they depart from it only where the targets need it (0)",
     )
     parser.add_argument("--lr", type=types.positive_rate, default=2e-4, help="Adam learning rate (default 0.0002)")
     parser.add_argument(

@@ -20,6 +20,7 @@ from wise.editor.session import EditorSession
 from wise.errors import WiseError
 from wise.files import MAX_PARAMS_BYTES, open_regular
 from wise.io import MAX_IMAGE_BYTES
+from wise.ppn.predictor import LocalPredictor
 
 """Listen addresses that mean every interface."""
 TOKEN_BYTES = 32
@@ -33,9 +34,16 @@ def _read(path: str, what: str, max_bytes: int) -> bytes:
 
 
 def initial_session(
-    image: str | None = None, params: str | None = None, effect: str | None = None, preset: str | None = None
+    image: str | None = None,
+    params: str | None = None,
+    effect: str | None = None,
+    preset: str | None = None,
+    model: str | None = None,
 ) -> EditorSession:
-    """The state every browser session starts from, checked before the server starts."""
+    """The state every browser session starts from, checked before the server starts; with
+    ``model`` (a translator), results are its CNN's drawings of the effect's output."""
+    if model is not None and params is None:
+        raise WiseError("--model renders the masks it painted: pass them with --params (from 'wise predict')")
     if params is not None and (effect is not None or preset is not None):
         raise WiseError("--params comes with its own effect; leave out --effect and --preset")
     if preset is not None and effect is None:
@@ -46,6 +54,8 @@ def initial_session(
     elif effect is not None:
         effects.create(effect)
         session.choose_effect(effect, preset)
+    if model is not None:
+        session.use_translator(LocalPredictor(model, session.effect.name))
     if image is not None:
         session.open_image(_read(image, "image", MAX_IMAGE_BYTES), Path(image).name)
     return session

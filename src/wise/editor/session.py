@@ -32,6 +32,7 @@ from wise.errors import WiseError
 from wise.io import decode_image_bytes, pixel_limit, tensor_to_image, write_image
 from wise.paramfile import effect_of, load_params, save_params
 from wise.params import resize_masks, to_real
+from wise.ppn.predictor import LocalPredictor
 from wise.render import render
 
 PREVIEW_SHORT_SIDE = 512
@@ -169,6 +170,9 @@ class EditorSession:
     """``time.monotonic()`` of the last change made in this session; None while it is as it started."""
     notice: str | None = None
     """A message for the page about the last file opened (e.g. values clamped), sent once."""
+    translator: LocalPredictor | None = None
+    """A model with a CNN after the effect (``wise edit --model``): the result is the CNN's
+    drawing of the effect's output, at the model's working size, while its effect is chosen."""
     _undo: list[_Change] = field(default_factory=list)
     _redo: list[_Change] = field(default_factory=list)
     _lock: threading.RLock = field(default_factory=threading.RLock)
@@ -189,7 +193,25 @@ class EditorSession:
                 opened=self.opened.clone(),
                 masks_from_file=self.masks_from_file,
                 notice=self.notice,
+                translator=self.translator,
             )
+
+    def use_translator(self, translator: LocalPredictor) -> None:
+        """Render through ``translator``'s CNN (refused for a model of another effect or without a CNN)."""
+        if not translator.translates or translator.network.post is None:
+            raise WiseError(f"{translator.info.source}: not a model with a CNN after the effect; leave out --model")
+        if translator.info.effect != self.effect.name:
+            raise WiseError(
+                f"{translator.info.source}: a model of {translator.info.effect!r}, the masks are of "
+                f"{self.effect.name!r}; open its own masks (from 'wise predict') with --params"
+            )
+        self.translator = translator
+
+    def _stylize(self, effect: Effect, image: torch.Tensor, masks: torch.Tensor) -> torch.Tensor:
+        """The effect's rendering of ``image``, or with a translator of this effect, its drawing."""
+        if self.translator is not None and self.translator.info.effect == effect.name:
+            return self.translator.finish(image, masks).result
+        return render(effect.eval(), image, masks)
 
     # ----- opening -------------------------------------------------------------------------
 
@@ -354,16 +376,20 @@ class EditorSession:
     def render_preview(self, snapshot: Snapshot) -> bytes:
         """The stylized preview of a snapshot as PNG."""
         content = self._require_content(snapshot)
-        return preview_png(render(snapshot.effect.eval(), content.preview, snapshot.masks))
+        made = self._stylize(snapshot.effect, content.preview, snapshot.masks)
+        if made.shape[-2:] != content.preview.shape[-2:]:
+            made = F.interpolate(made, size=content.preview.shape[-2:], mode="bilinear", align_corners=False)
+        return preview_png(made.clamp(0.0, 1.0))
 
     def content_preview(self) -> bytes:
         content = self._require_content(self.snapshot())
         return preview_png(content.preview)
 
     def render_full(self, snapshot: Snapshot) -> bytes:
-        """The result at the content's full resolution as PNG: the pixels ``wise apply --params`` writes."""
+        """The result at the content's full resolution as PNG: the pixels ``wise apply --params`` writes
+        (with a translator, at its model's working size: those of ``wise apply --params --model``)."""
         content = self._require_content(snapshot)
-        return png_bytes(render(snapshot.effect.eval(), content.image, snapshot.masks))
+        return png_bytes(self._stylize(snapshot.effect, content.image, snapshot.masks))
 
     def params_file(self) -> bytes:
         """The masks as a parameter file (safetensors bytes)."""

@@ -23,7 +23,7 @@ from wise.io.limits import (
     pixel_limit,
 )
 from wise.io.read import IMAGE_SUFFIXES, READ_FORMATS, decode_image_bytes, image_to_tensor, read_image
-from wise.io.write import WRITE_FORMATS, atomic_path, tensor_to_image, write_image
+from wise.io.write import WRITE_FORMATS, atomic_path, tensor_to_image, write_image, write_together
 
 __all__ = [
     "DEFAULT_MAX_PIXELS",
@@ -35,6 +35,7 @@ __all__ = [
     "WRITE_FORMATS",
     "PathLike",
     "atomic_path",
+    "write_together",
     "decode_image_bytes",
     "image_to_tensor",
     "pixel_limit",

@@ -11,7 +11,7 @@ import contextlib
 import os
 import tempfile
 from pathlib import Path
-from typing import Iterator
+from typing import Callable, Iterator, Sequence
 
 import numpy as np
 import torch
@@ -94,3 +94,19 @@ def write_image(image: torch.Tensor, path: PathLike, quality: int = 95) -> None:
             img.save(tmp, format=fmt, **options)
     except OSError as e:
         raise WiseError(f"{target}: cannot write the image ({e.strerror or one_line(e)})") from None
+
+
+def write_together(writers: Sequence[tuple[PathLike, Callable[[Path], None]]]) -> None:
+    """Write several files that belong together: each ``(path, write)`` in turn; on any error
+    (Ctrl-C included) the files already written are removed again, so that all are there or
+    none."""
+    started: list[Path] = []
+    try:
+        for path, write in writers:
+            started.append(Path(path))
+            write(Path(path))
+    except BaseException:
+        for path in started:
+            with contextlib.suppress(OSError):
+                path.unlink()
+        raise

@@ -8,8 +8,11 @@ A model file holds the network's weights (float32 or float16) and string metadat
 ``kind``          ``"global"`` (parameters from photo and example) or ``"local"`` (parameter
                   masks from the photo alone)
 ``architecture``  a name of :data:`wise.ppn.ARCHITECTURES` (global) or
-                  :data:`wise.ppn.LOCAL_ARCHITECTURES` (local)
-``network``       JSON of the architecture's options (a local network's depth and widths)
+                  :data:`wise.ppn.LOCAL_ARCHITECTURES` (local), or ``translator``: a local
+                  model with a post-processing CNN, a fixed preset or no effect
+                  (:mod:`wise.ppn.translation`; its effect may be ``none``)
+``network``       JSON of the architecture's options (a local network's depth and widths; a
+                  translator's :func:`wise.ppn.translation.translator_options`)
 ``parameters``    JSON list of the parameter names, in the order of the outputs
 ``ranges``        JSON list of ``[min, max]`` per parameter (real units, for information)
 ``size``          the working size: the images are resized to this short side
@@ -39,6 +42,8 @@ from wise.errors import WiseError
 from wise.files import MAX_MODEL_BYTES, read_safetensors, read_safetensors_header, safetensors_path
 from wise.io import atomic_path
 from wise.ppn import ARCHITECTURES, LOCAL_ARCHITECTURES, create, create_local
+from wise.ppn.translation import ARCHITECTURE as TRANSLATOR
+from wise.ppn.translation import NO_EFFECT, build_translator
 
 FORMAT = "wise-ppn"
 VERSION = "1"
@@ -69,6 +74,8 @@ class ModelInfo:
 
 def build_network(info: ModelInfo) -> nn.Module:
     """An untrained network of the architecture and options ``info`` names."""
+    if info.kind == "local" and info.architecture == TRANSLATOR:
+        return build_translator(info.effect, info.network)
     if info.kind == "local":
         return create_local(info.architecture, len(info.parameters), **info.network)
     return create(info.architecture, len(info.parameters))
@@ -78,7 +85,7 @@ def save_model(path: str | os.PathLike[str], network: nn.Module, info: ModelInfo
     """Write ``network``'s weights and ``info`` to ``path`` atomically (float16 with ``half``)."""
     if info.kind not in KINDS or info.architecture not in _architectures(info.kind):
         raise WiseError(f"unknown {info.kind} architecture {info.architecture!r}")
-    effect = effects.create(info.effect)
+    specs = () if info.effect == NO_EFFECT else effects.create(info.effect).param_specs
     dtype = torch.float16 if half else torch.float32
     tensors = {name: value.detach().to("cpu", dtype).contiguous() for name, value in network.state_dict().items()}
     metadata = {
@@ -89,7 +96,7 @@ def save_model(path: str | os.PathLike[str], network: nn.Module, info: ModelInfo
         "architecture": info.architecture,
         "network": json.dumps(info.network, sort_keys=True),
         "parameters": json.dumps(info.parameters),
-        "ranges": json.dumps([[s.min, s.max] for s in effect.param_specs]),
+        "ranges": json.dumps([[s.min, s.max] for s in specs]),
         "size": str(info.size),
         "render_size": str(info.render_size),
         "settings": json.dumps(info.settings, sort_keys=True),
@@ -103,8 +110,8 @@ def save_model(path: str | os.PathLike[str], network: nn.Module, info: ModelInfo
         raise WiseError(f"{path}: cannot write the model ({e.strerror or e})") from None
 
 
-def _architectures(kind: str) -> dict[str, type[nn.Module]]:
-    return LOCAL_ARCHITECTURES if kind == "local" else ARCHITECTURES
+def _architectures(kind: str) -> dict[str, object]:
+    return {**LOCAL_ARCHITECTURES, TRANSLATOR: build_translator} if kind == "local" else dict(ARCHITECTURES)
 
 
 def builtin_model_path(effect: str, task: str | None = None) -> Path:
@@ -148,8 +155,10 @@ def _info(path: Path, metadata: dict[str, str], effect: str | None) -> ModelInfo
     model_effect = metadata.get("effect", "")
     if effect is not None and model_effect != effect:
         raise WiseError(f"{path}: a model for {model_effect!r}, not {effect!r}; pass a model of {effect!r}")
-    known = effects.create(effect or model_effect)
     architecture = metadata.get("architecture", "")
+    if (effect or model_effect) == NO_EFFECT and architecture != TRANSLATOR:
+        raise WiseError(f"{path}: only a translator (CNN) model may have no effect; {TRAIN_ONE}")
+    known = None if (effect or model_effect) == NO_EFFECT else effects.create(effect or model_effect)
     known_architectures = _architectures(kind)
     if architecture not in known_architectures:
         raise WiseError(
@@ -162,15 +171,17 @@ def _info(path: Path, metadata: dict[str, str], effect: str | None) -> ModelInfo
     except json.JSONDecodeError:
         raise WiseError(f"{path}: the model's metadata is not valid JSON; {TRAIN_ONE}") from None
     if not isinstance(network, dict) or not all(
-        isinstance(k, str) and isinstance(v, int) and not isinstance(v, bool) for k, v in network.items()
+        isinstance(k, str) and isinstance(v, (int, str)) and (architecture == TRANSLATOR or not isinstance(v, bool))
+        for k, v in network.items()
     ):
-        raise WiseError(f"{path}: the model's network options are not whole numbers by name; {TRAIN_ONE}")
-    if parameters != known.param_names:
+        raise WiseError(f"{path}: the model's network options are not whole numbers or names by name; {TRAIN_ONE}")
+    known_names = known.param_names if known is not None else []
+    if parameters != known_names:
         raise WiseError(
-            f"{path}: the model predicts other parameters than {known.name!r} has now; retrain it ({TRAIN_ONE})"
+            f"{path}: the model predicts other parameters than {model_effect!r} has now; retrain it ({TRAIN_ONE})"
         )
     return ModelInfo(
-        effect=known.name,
+        effect=known.name if known is not None else NO_EFFECT,
         architecture=architecture,
         parameters=parameters,
         size=_number(path, metadata, "size"),

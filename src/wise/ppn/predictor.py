@@ -12,7 +12,9 @@ import os
 import torch
 import torch.nn.functional as F
 
+from wise import effects
 from wise.ppn.modelfile import BUILTIN_PREFIX, load_model, resolve_model
+from wise.ppn.translation import NO_EFFECT, Stages, Translator
 
 
 def at_short_side(image: torch.Tensor, short_side: int) -> torch.Tensor:
@@ -49,16 +51,44 @@ class Predictor:
 class LocalPredictor:
     """A loaded local model: ``predictor(photo)`` -> normalized parameter masks ``(B, P, h, w)``
     at the model's working size (the short side it was trained at; the effect enlarges them
-    to the picture it renders)."""
+    to the picture it renders).
+
+    A translator (a model with a post-processing CNN, a fixed preset or no effect;
+    :mod:`wise.ppn.translation`) also gives its stages, :meth:`stages`, and re-runs the
+    effect and the CNN on edited masks, :meth:`finish`: both at the working size, the scale
+    its CNN learned."""
 
     def __init__(self, model: str | os.PathLike[str], effect: str, device: torch.device | str = "cpu") -> None:
         path = resolve_model(model, effect, "local")
         self.network, self.info = load_model(path, effect, "local")
         self.network.to(device)
         self.device = torch.device(device)
+        self.effect = None if self.info.effect == NO_EFFECT else effects.create(self.info.effect).to(device)
         if str(model).startswith(BUILTIN_PREFIX):
             self.info.source = str(model)
 
+    @property
+    def translates(self) -> bool:
+        return isinstance(self.network, Translator)
+
     @torch.no_grad()
-    def __call__(self, photo: torch.Tensor) -> torch.Tensor:
-        return self.network(at_short_side(photo, self.info.size).to(self.device)).float().cpu()
+    def __call__(self, photo: torch.Tensor) -> torch.Tensor | None:
+        """Masks ``(B, P, h, w)``; a translator's may be its preset ``(B, P)`` or None (no effect)."""
+        small = at_short_side(photo, self.info.size).to(self.device)
+        masks = self.network.masks(small) if self.translates else self.network(small)
+        return None if masks is None else masks.float().cpu()
+
+    @torch.no_grad()
+    def stages(self, photo: torch.Tensor) -> Stages:
+        """Masks, effect stage and final image of ``photo`` at the working size."""
+        return self.finish(photo, self(photo))
+
+    @torch.no_grad()
+    def finish(self, photo: torch.Tensor, masks: torch.Tensor | None) -> Stages:
+        """Effect stage and final image of ``photo`` at the working size with ``masks`` (any size)."""
+        small = at_short_side(photo, self.info.size).to(self.device)
+        if not self.translates:
+            stage = self.effect(small, masks.to(self.device))
+            return Stages(masks, stage.cpu(), stage.cpu())
+        made = self.network.finish(small, None if masks is None else masks.to(self.device))
+        return Stages(masks, made.stage.float().cpu(), made.result.float().cpu())

@@ -23,7 +23,6 @@ with ``<name>`` = ``<photo stem>_<k:03d>``, k counting the photo's crops.
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
 import json
 import math
@@ -41,7 +40,7 @@ from wise import effects
 from wise.effects.base import Effect
 from wise.errors import WiseError, WiseWarning
 from wise.interrupt import ctrl_c
-from wise.io import atomic_path, write_image
+from wise.io import atomic_path, write_image, write_together
 from wise.paramfile import save_params
 from wise.train import regions
 from wise.train.data import photo_files, read_photos, split_files
@@ -349,16 +348,7 @@ def _write_pair(folder: Path, split: str, name: str, crop: torch.Tensor, made: d
         lambda path: write_image(regions.true_region(made["soft"]).float(), path),
         lambda path: save_params(path, effect, made["masks"]),
     )
-    started: list[Path] = []
-    try:
-        for path, write in zip(paths, writers):
-            started.append(path)
-            write(path)
-    except BaseException:
-        for path in started:
-            with contextlib.suppress(OSError):
-                path.unlink()
-        raise
+    write_together(list(zip(paths, writers)))
 
 
 def task_description(
@@ -383,7 +373,7 @@ def task_description(
     }
 
 
-def _schedule(splits: Mapping[str, list[Photo]], counts: Mapping[str, list[int]]) -> list[tuple[str, Photo, int]]:
+def schedule_pairs(splits: Mapping[str, list[Photo]], counts: Mapping[str, list[int]]) -> list[tuple[str, Photo, int]]:
     """Every pair as (split, photo, k), in rounds over all photos (crop k of each photo before
     crop k + 1 of any), so that a set stopped early has pairs of both splits and many photos."""
     rounds = max(max(c, default=0) for c in counts.values())
@@ -415,7 +405,7 @@ def write_pairs(
             warnings.warn(f"{images}: skipped {len(skipped)} unreadable or too small files", WiseWarning, stacklevel=2)
     effect = effect.eval()
     splits = split_photos(photos, settings.test_share, settings.seed)
-    schedule = _schedule(splits, pair_counts(splits, settings.count))
+    schedule = schedule_pairs(splits, pair_counts(splits, settings.count))
     root = Path(folder)
     created = [root / split for split in SPLITS if not (root / split).exists()]
     try:

@@ -12,19 +12,24 @@ from __future__ import annotations
 import json
 import math
 import sys
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TextIO
 
+import numpy as np
 import torch
 
 from wise import effects, metrics
 from wise.effects.base import Effect
+from wise.fidelity.fid import frechet_distance
 from wise.interrupt import ctrl_c
 from wise.io import atomic_path, read_image
 from wise.ppn.predictor import LocalPredictor
+from wise.ppn.translation import NO_EFFECT, Stages
 from wise.train.local_settings import TASK_FILE, read_task
 from wise.train.losses import total_variation
-from wise.train.pairs import SPLITS, Pair, check_pairs, pairs_in
+from wise.train.pairs import SPLITS, Pair, check_pairs, dataset_root, pairs_in
+from wise.train.pairs_page import PAGE_PAIRS, write_pairs_page
 
 DEPARTURE_SHARE = 0.5
 """A mask departs from the preset where it has gone this share of the way to the task's value."""
@@ -34,7 +39,7 @@ REGION_THRESHOLD = 0.5
 def bench_folder(folder: str | Path) -> Path:
     """The split folder to measure: ``folder`` itself when it holds the pairs, else its
     ``test/`` split."""
-    path = Path(folder)
+    path = dataset_root(folder)
     if (path / "A").is_dir() or not any((path / split).is_dir() for split in SPLITS):
         return path
     return path / "test"
@@ -65,6 +70,15 @@ def baseline_params(effect: Effect, task: dict, settings: dict) -> tuple[torch.T
         if isinstance(name, str) and name in effect.presets:
             return effect.preset(name), name
     return effect.default_params(), "defaults"
+
+
+def translator_baseline(effect: Effect, start: torch.Tensor) -> tuple[torch.Tensor, str]:
+    """A translator's baseline: the effect at the preset it starts from (or runs at), named
+    when it is one of the effect's presets."""
+    for name in effect.presets:
+        if torch.allclose(effect.preset(name), start, atol=1e-3):
+            return start, name
+    return start, "the model's start values"
 
 
 def _scores(result: torch.Tensor, target: torch.Tensor) -> dict[str, float]:
@@ -102,6 +116,78 @@ def _means(rows: list[dict], keys: tuple[str, ...], prefix: str = "") -> dict[st
     return means
 
 
+@dataclass
+class PerceptualMetrics:
+    """The networks of the optional metrics: FID's Inception (:func:`wise.fidelity.load_inception`)
+    and LPIPS (:func:`wise.fidelity.load_lpips`), each None when not asked for. Load them
+    before the work starts, so that missing weight files are refused at once."""
+
+    inception: torch.nn.Module | None = None
+    lpips: torch.nn.Module | None = None
+    result_features: list[np.ndarray] = field(default_factory=list)
+    target_features: list[np.ndarray] = field(default_factory=list)
+
+    def add(self, result: torch.Tensor, target: torch.Tensor, row: dict) -> None:
+        """Measure one pair: its LPIPS into ``row``, its Inception features kept for FID."""
+        with torch.no_grad():
+            if self.lpips is not None:
+                row["lpips"] = float(self.lpips(result.clamp(0.0, 1.0), target)[0])
+            if self.inception is not None:
+                self.result_features.append(self.inception(result.clamp(0.0, 1.0)).double().numpy())
+                self.target_features.append(self.inception(target).double().numpy())
+
+    def fid(self) -> float | None:
+        """FID between the results and the targets measured (None without Inception or with
+        fewer than two pairs)."""
+        if self.inception is None or len(self.result_features) < 2:
+            return None
+        moments = []
+        for features in (np.concatenate(self.result_features), np.concatenate(self.target_features)):
+            moments += [features.mean(axis=0), np.cov(features, rowvar=False)]
+        return frechet_distance(*moments)
+
+
+def _measure(
+    predictor: LocalPredictor,
+    effect: Effect | None,
+    preset: torch.Tensor | None,
+    pair: Pair,
+    task: dict,
+    perceptual: PerceptualMetrics | None = None,
+) -> tuple[dict, Stages]:
+    """The row of one pair and its stages (masks, effect stage, result)."""
+    photo, target = read_image(pair.photo), read_image(pair.target)
+    with torch.no_grad():
+        if predictor.translates:
+            made = predictor.stages(photo)
+            made = Stages(made.masks, _at(made.stage, target), _at(made.result, target))
+        else:
+            masks = predictor(photo)
+            result = effect(photo, masks)
+            made = Stages(masks, result, result)
+        row = {"name": pair.name, **_scores(made.result, target)}
+        if perceptual is not None:
+            perceptual.add(made.result, target, row)
+        if predictor.translates and effect is not None and predictor.network.post is not None:
+            row.update({f"stage_{k}": v for k, v in _scores(made.stage.clamp(0.0, 1.0), target).items()})
+        if effect is not None and preset is not None:
+            baseline = effect(photo, preset[None])
+            row.update({f"baseline_{k}": v for k, v in _scores(baseline, target).items()})
+    if made.masks is not None and made.masks.dim() == 4:
+        row["tv"] = float(total_variation(made.masks))
+        if pair.region is not None:
+            region = read_image(pair.region)[:, :1]
+            row["iou"] = region_iou(made.masks, region, effect, task)
+    return row, made
+
+
+def _at(image: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """``image`` at the size of ``target`` (a translator works at its model's size)."""
+    if image.shape[-2:] == target.shape[-2:]:
+        return image
+    return torch.nn.functional.interpolate(image, size=target.shape[-2:], mode="bilinear", align_corners=False)
+
+
 def bench_pairs(
     model: str,
     effect_name: str,
@@ -109,50 +195,65 @@ def bench_pairs(
     json_path: str | Path,
     device: torch.device | str = "cpu",
     out: TextIO = sys.stdout,
+    html_path: str | Path | None = None,
+    perceptual: PerceptualMetrics | None = None,
 ) -> dict:
     """Measure ``model`` on the pairs of ``folder`` and write the results to ``json_path``
-    (atomically; Ctrl-C writes the pairs measured so far)."""
-    effect = effects.create(effect_name)
+    (atomically; Ctrl-C writes the pairs measured so far); with ``html_path``, a results
+    page of the first pairs (:func:`wise.train.pairs_page.write_pairs_page`)."""
+    effect = None if effect_name == NO_EFFECT else effects.create(effect_name)
     predictor = LocalPredictor(model, effect_name, device)
     pairs, task = read_pairs(folder)
-    preset, preset_name = baseline_params(effect, task, predictor.info.settings)
+    preset, preset_name = (None, None) if effect is None else baseline_params(effect, task, predictor.info.settings)
+    if effect is not None and predictor.translates:
+        preset, preset_name = translator_baseline(effect, predictor.network.start.float().cpu())
     rows: list[dict] = []
+    shown: list[tuple[Pair, Stages]] = []
     with ctrl_c(out) as interruption:
         for pair in pairs:
             if interruption.received:
                 break
-            photo, target = read_image(pair.photo), read_image(pair.target)
-            with torch.no_grad():
-                masks = predictor(photo)
-                result = effect(photo, masks)
-                baseline = effect(photo, preset[None])
-            row = {"name": pair.name, **_scores(result, target)}
-            row.update({f"baseline_{k}": v for k, v in _scores(baseline, target).items()})
-            row["tv"] = float(total_variation(masks))
-            if pair.region is not None:
-                region = read_image(pair.region)[:, :1]
-                row["iou"] = region_iou(masks, region, effect, task)
+            row, made = _measure(predictor, effect, preset, pair, task, perceptual)
             rows.append(row)
+            if html_path is not None and len(shown) < PAGE_PAIRS:
+                shown.append((pair, made))
     summary = {
         "model": predictor.info.source,
-        "effect": effect.name,
+        "effect": effect_name,
         "pairs": str(folder),
         "task": task.get("task"),
         "baseline": preset_name,
         "count": len(rows),
         "interrupted": interruption.received,
-        **_means(rows, ("l1", "psnr", "ssim", "tv", "iou")),
+        **_means(rows, ("l1", "psnr", "ssim", "lpips", "tv", "iou")),
+        **_means(rows, ("l1", "psnr", "ssim"), prefix="stage_"),
         **_means(rows, ("l1", "psnr", "ssim"), prefix="baseline_"),
         "rows": rows,
     }
+    fid = perceptual.fid() if perceptual is not None else None
+    if fid is not None:
+        summary["fid"] = fid
     with atomic_path(json_path) as tmp:
         Path(tmp).write_text(json.dumps(summary, indent=2) + "\n")
+    if html_path is not None:
+        write_pairs_page(html_path, summary, shown, effect)
+    print(summary_line(summary) + f"; {json_path}", file=out, flush=True)
+    return summary
+
+
+def summary_line(summary: dict) -> str:
+    """One line of the means of :func:`bench_pairs`."""
     mean = {key: summary.get(key, math.nan) for key in ("mean_l1", "baseline_mean_l1", "mean_psnr", "mean_ssim")}
-    line = (
-        f"{len(rows)} pairs: L1 {mean['mean_l1']:.4f} (preset {mean['baseline_mean_l1']:.4f}), "
-        f"PSNR {mean['mean_psnr']:.2f} dB, SSIM {mean['mean_ssim']:.4f}"
-    )
+    line = f"{summary['count']} pairs: L1 {mean['mean_l1']:.4f}"
+    if "baseline_mean_l1" in summary:
+        line += f" (preset {mean['baseline_mean_l1']:.4f})"
+    line += f", PSNR {mean['mean_psnr']:.2f} dB, SSIM {mean['mean_ssim']:.4f}"
+    if "mean_lpips" in summary:
+        line += f", LPIPS {summary['mean_lpips']:.4f}"
+    if "fid" in summary:
+        line += f", FID {summary['fid']:.2f}"
+    if "stage_mean_l1" in summary:
+        line += f"; effect stage L1 {summary['stage_mean_l1']:.4f}"
     if "mean_iou" in summary:
         line += f", region IoU {summary['mean_iou']:.3f}"
-    print(line + f"; {json_path}", file=out, flush=True)
-    return summary
+    return line

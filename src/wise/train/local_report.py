@@ -24,6 +24,7 @@ CURVES = (
     ("train_l1", "training L1 to the targets"),
     ("val_l1", "test L1 to the targets"),
     ("val_tv", "test masks' total variation"),
+    ("train_departure", "masks' departure from the start preset"),
     ("train_d_loss", "discriminator loss"),
 )
 
@@ -45,28 +46,36 @@ def _picture(tensor: torch.Tensor) -> Image.Image:
 
 
 def pairs_section(module: LocalGAN, test_set: PairDataset, task: Mapping[str, object]) -> str:
-    """Rows of photo, predicted mask (heat map over its range), result and target."""
+    """Rows of photo, predicted mask (heat map over its range), effect stage (with a
+    post-processing CNN), result and target."""
     rows = []
-    module.generator.eval()
-    specs = module.effect.param_specs
+    module.network.eval()
+    with_stage = module.network.post is not None and module.effect is not None
     for index in range(min(PAIRS_SHOWN, len(test_set))):
         item = test_set[index]
         batch = {"photo": item["photo"][None], "scale": item["scale"], "origin": item["origin"][None]}
         with torch.no_grad():
-            masks, made = module.generate(batch)
-        shown = shown_parameter(module, masks, task)
-        real_mask = P.to_real(masks, specs)[0, shown]
-        spec = specs[shown]
-        mask_picture = Image.fromarray(heatmap(real_mask, spec.min, spec.max)).resize((SIDE, SIDE))
+            masks, stage, made = module.generate(batch)
         l1 = float((made[0] - item["target"]).abs().mean())
-        cells = [
-            _figure(_picture(item["photo"][None]), "photo"),
-            _figure(mask_picture, f"{spec.name} [{spec.min:g}, {spec.max:g}]"),
-            _figure(_picture(made), "result"),
-            _figure(_picture(item["target"][None]), "target"),
-        ]
+        cells = [_figure(_picture(item["photo"][None]), "photo")]
+        if masks is not None and masks.dim() == 4:
+            cells.append(_mask_figure(module, masks, task))
+        if with_stage:
+            cells.append(_figure(_picture(stage.clamp(0.0, 1.0)), "effect stage"))
+        cells += [_figure(_picture(made), "result"), _figure(_picture(item["target"][None]), "target")]
         rows.append(f'<div class="row">{"".join(cells)}<p>{html.escape(item["name"])}: L1 {l1:.4f}</p></div>')
-    return "<section><h2>Test pairs: photo, predicted mask, result, target</h2>" + "".join(rows) + "</section>"
+    heading = "photo, predicted mask, " if module.generator is not None else "photo, "
+    heading += "effect stage, result, target" if with_stage else "result, target"
+    return f"<section><h2>Test pairs: {heading}</h2>" + "".join(rows) + "</section>"
+
+
+def _mask_figure(module: LocalGAN, masks: torch.Tensor, task: Mapping[str, object]) -> str:
+    specs = module.effect.param_specs
+    shown = shown_parameter(module, masks, task)
+    spec = specs[shown]
+    real_mask = P.to_real(masks, specs)[0, shown]
+    picture = Image.fromarray(heatmap(real_mask, spec.min, spec.max)).resize((SIDE, SIDE))
+    return _figure(picture, f"{spec.name} [{spec.min:g}, {spec.max:g}]")
 
 
 def write_local_report(

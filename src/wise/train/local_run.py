@@ -16,11 +16,13 @@ from typing import TextIO
 import lightning as L
 
 from wise.io import atomic_path
-from wise.ppn.modelfile import ModelInfo, save_model
+from wise.ppn.modelfile import ModelInfo, load_model, save_model
+from wise.ppn.translation import ARCHITECTURE as TRANSLATOR
+from wise.ppn.translation import translator_options
 from wise.train.engine import fit_run, log_files, trainer_options
 from wise.train.local import LocalGAN, PairData
 from wise.train.local_report import write_local_report
-from wise.train.local_settings import LocalSettings, prepare_local, read_task, start_params
+from wise.train.local_settings import LocalSettings, init_model, prepare_local, read_task, start_params
 from wise.train.pairs import Pair, PairDataset
 from wise.train.settings import MODEL_FILE, REPORT_FILE, SETTINGS_FILE, is_launched_rank
 
@@ -30,7 +32,7 @@ several to a photo)."""
 
 
 def _module(settings: LocalSettings) -> LocalGAN:
-    return LocalGAN(
+    module = LocalGAN(
         settings.effect,
         start_params(settings).tolist(),
         {"depth": settings.depth, "width": settings.width, "max_width": settings.max_width},
@@ -38,12 +40,22 @@ def _module(settings: LocalSettings) -> LocalGAN:
         gan_weight=settings.gan_weight,
         l1_weight=settings.l1_weight,
         tv_weight=settings.tv_weight,
+        preset_weight=settings.preset_weight,
         lr=settings.lr,
         lr_schedule=settings.lr_schedule,
         discriminator_width=settings.discriminator_width,
         anneal=settings.anneal,
         soft_gradients=settings.soft_gradients,
+        post=settings.post,
+        post_width=settings.post_width,
+        ppn_kind=settings.ppn,
+        dropout=settings.dropout,
     )
+    init = init_model(settings)
+    if init is not None:
+        network, _ = load_model(init, settings.effect, "local")
+        module.generator.load_state_dict(network.state_dict())
+    return module
 
 
 def _trainer(settings: LocalSettings, folder: Path, callbacks: list, batches_per_epoch: int, optimizers: int):
@@ -110,18 +122,23 @@ def _write_results(
         "steps_done": summary["steps"],
         "processes": summary["processes"],
     }
-    network = {"depth": settings.depth, "width": settings.width, "max_width": settings.max_width}
+    network: dict = {"depth": settings.depth, "width": settings.width, "max_width": settings.max_width}
+    saved, architecture = module.generator, "unet"
+    if settings.translates:
+        saved, architecture = module.network, TRANSLATOR
+        network = translator_options(settings.ppn, settings.post, settings.post_width, settings.dropout, **network)
+    parameters = module.effect.param_names if module.effect is not None else []
     info = ModelInfo(
         settings.effect,
-        "unet",
-        module.effect.param_names,
+        architecture,
+        parameters,
         settings.load_size,
         settings.load_size,
         shared,
         kind="local",
         network=network,
     )
-    save_model(folder / MODEL_FILE, module.generator, info, half=settings.half)
+    save_model(folder / MODEL_FILE, saved, info, half=settings.half)
     write_local_report(folder / REPORT_FILE, module, test_set, log_files(folder), summary, read_task(settings.pairs))
     print(
         f"{summary['steps']} steps; {summary['examples_per_second']:.1f} examples/s in all, "

@@ -11,6 +11,9 @@ import torch
 
 from wise import effects
 from wise.errors import WiseError
+from wise.ppn.modelfile import model_info, resolve_model
+from wise.ppn.postprocess import DEFAULT_WIDTH
+from wise.ppn.translation import NO_EFFECT, NO_POST, POST_KINDS, PPN_KINDS
 from wise.train.discriminator import GAN_LOSSES
 from wise.train.pairs import Pair, check_pairs, pair_files
 from wise.train.schedules import LR_SCHEDULES
@@ -21,7 +24,7 @@ TASK_FILE = "task.json"
 DIRECTIONS = ("AtoB", "BtoA")
 LOCAL_RESUMABLE = (
     "effect", "pairs", "start", "depth", "width", "max_width", "discriminator_width", "gan_weight", "batch",
-    "load_size", "crop_size", "seed", "direction",
+    "load_size", "crop_size", "seed", "direction", "post", "post_width", "ppn", "dropout",
 )  # fmt: skip
 """Settings a resumed run must share with the run it continues."""
 
@@ -34,6 +37,9 @@ class LocalSettings:
     pairs: str
     start: str | None = None
     """The preset the untrained network paints everywhere (None: the task's preset, else the defaults)."""
+    init: str | None = None
+    """A local model of the effect (file or ``builtin:<task>``) whose weights the network starts
+    from instead (fine-tuning); its depth and widths must be the run's."""
     depth: int = 6
     width: int = 16
     max_width: int = 64
@@ -42,6 +48,8 @@ class LocalSettings:
     gan_weight: float = 1.0
     l1_weight: float = 100.0
     tv_weight: float = 1.0
+    preset_weight: float = 0.0
+    """δ: L1 of the masks to the start preset (0: none)."""
     lr: float = 2e-4
     lr_schedule: str = "linear"
     batch: int = 1
@@ -53,6 +61,13 @@ class LocalSettings:
     direction: str = "AtoB"
     anneal: float = 0.0
     soft_gradients: float = 0.0
+    post: str = NO_POST
+    """The post-processing CNN after the effect (``resnet``, ``unet``; ``none``: no CNN)."""
+    post_width: int = DEFAULT_WIDTH
+    ppn: str = "local"
+    """``local``: a PPN paints the masks; ``preset``: the effect runs at the start preset."""
+    dropout: bool = False
+    """pix2pix's dropout in the post-processing CNN."""
     workers: int = 0
     accelerator: str = "auto"
     devices: int = 1
@@ -61,15 +76,39 @@ class LocalSettings:
     half: bool = False
     checkpoint_every: int = 200
 
+    @property
+    def has_effect(self) -> bool:
+        return self.effect != NO_EFFECT
+
+    @property
+    def translates(self) -> bool:
+        """Whether the model is a translator (:mod:`wise.ppn.translation`), not a plain local PPN."""
+        return self.post != NO_POST or self.ppn != "local" or not self.has_effect
+
     def check(self) -> None:
-        effects.create(self.effect)
+        if self.has_effect:
+            effects.create(self.effect)
+        if self.post not in POST_KINDS:
+            raise WiseError(f"unknown post-processing network {self.post!r}; use one of {', '.join(POST_KINDS)}")
+        if self.ppn not in PPN_KINDS:
+            raise WiseError(f"unknown --ppn {self.ppn!r}; use one of {', '.join(PPN_KINDS)}")
+        if not self.has_effect and self.post == NO_POST:
+            raise WiseError("the effect 'none' trains a CNN alone: choose one with --post resnet or --post unet")
+        if self.has_effect and self.ppn == "preset" and self.post == NO_POST:
+            raise WiseError(
+                "--ppn preset with --post none has nothing to learn: add a CNN with --post, or use --ppn local"
+            )
+        if self.init is not None and (not self.has_effect or self.ppn != "local"):
+            raise WiseError("--init starts the PPN from a local model: it needs an effect and --ppn local")
+        if self.post_width < 1:
+            raise WiseError(f"--post-width {self.post_width} must be at least 1")
         if self.gan_loss not in GAN_LOSSES:
             raise WiseError(f"unknown GAN loss {self.gan_loss!r}; use one of {', '.join(GAN_LOSSES)}")
         if self.lr_schedule not in LR_SCHEDULES:
             raise WiseError(f"unknown learning-rate schedule {self.lr_schedule!r}; use {', '.join(LR_SCHEDULES)}")
         if self.direction not in DIRECTIONS:
             raise WiseError(f"unknown direction {self.direction!r}; use AtoB or BtoA")
-        for name in ("gan_weight", "l1_weight", "tv_weight"):
+        for name in ("gan_weight", "l1_weight", "tv_weight", "preset_weight"):
             if getattr(self, name) < 0:
                 flag = "--" + name.replace("_", "-")
                 raise WiseError(f"{flag} {getattr(self, name)} must not be negative")
@@ -97,25 +136,45 @@ def read_task(folder: str | Path) -> dict:
 
 
 def start_params(settings: LocalSettings) -> torch.Tensor:
-    """The ``(P,)`` normalized parameters the untrained network paints: ``--start``'s preset,
-    else the preset of the pairs' task (when it is of this effect), else the defaults."""
+    """The ``(P,)`` normalized parameters the untrained network paints (and the effect runs
+    at with ``--ppn preset``): ``--start``'s preset, else the preset of the pairs' task (when it
+    is of this effect), else the effect's first preset (xdog: ``portrait``) with ``--ppn preset``, else its
+    defaults; empty without an effect."""
+    if not settings.has_effect:
+        return torch.zeros(0)
     effect = effects.create(settings.effect)
     if settings.start is not None:
         return effect.preset(settings.start)
     task = read_task(settings.pairs)
     if task.get("effect") == settings.effect and task.get("preset") in effect.presets:
         return effect.preset(task["preset"])
+    if settings.ppn == "preset" and effect.presets:
+        return effect.preset(next(iter(effect.presets)))
     return effect.default_params()
 
 
 def check_task_effect(settings: LocalSettings) -> None:
     """Refuse pairs that an adaptive task made with another effect."""
     task_effect = read_task(settings.pairs).get("effect")
-    if task_effect is not None and task_effect != settings.effect:
+    if task_effect is not None and task_effect != settings.effect and settings.has_effect:
         raise WiseError(
             f"{settings.pairs}: pairs of the {task_effect!r} effect ({TASK_FILE}); train {task_effect}, "
             f"or make pairs of {settings.effect!r}"
         )
+
+
+def init_model(settings: LocalSettings) -> Path | None:
+    """The checked file of ``--init``: a local model of the run's effect, with its network
+    options; None without ``--init``."""
+    if settings.init is None:
+        return None
+    path = resolve_model(settings.init, settings.effect, "local")
+    network = model_info(path, settings.effect, "local").network
+    wanted = {"depth": settings.depth, "width": settings.width, "max_width": settings.max_width}
+    if network != wanted:
+        has = ", ".join(f"{name.replace('_', ' ')} {value}" for name, value in sorted(network.items()))
+        raise WiseError(f"--init {settings.init}: a network of {has}; give the same --depth, --width and --max-width")
+    return path
 
 
 def prepare_local(settings: LocalSettings, folder: Path, resume: bool) -> tuple[list[Pair], list[Pair]]:
@@ -126,6 +185,7 @@ def prepare_local(settings: LocalSettings, folder: Path, resume: bool) -> tuple[
         check_resumed(folder, settings, LOCAL_RESUMABLE)
     check_task_effect(settings)
     start_params(settings)
+    init_model(settings)
     train = pair_files(settings.pairs, "train", settings.direction)
     test = pair_files(settings.pairs, "test", settings.direction)
     check_pairs(train)

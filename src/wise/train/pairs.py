@@ -8,6 +8,10 @@ detected per split and read as they are:
 - pix2pix's aligned layout: ``<split>/<name>.<ext>``, each one image of even width with A on the
   left half and B on the right half.
 
+APDrawingDB (Yi et al. 2019) is read as it is distributed: its root holds ``data/train`` and
+``data/test`` in the aligned layout (beside ``landmark/`` and ``mask/``, which are not used), so
+either the root or its ``data`` folder may be passed.
+
 Either layout may hold ``<split>/regions/<name>.<ext>`` grey region masks (of the size of one A
 image) and the separate layout ``<split>/params/<name>.safetensors`` (only listed here). Hidden
 files (names starting with a dot) are left out.
@@ -108,8 +112,22 @@ def _images(folder: Path) -> dict[str, Path]:
     return {stem: paths[0] for stem, paths in by_stem.items()}
 
 
-def _split_folder(folder: str | Path, split: str) -> Path:
+DATA_FOLDER = "data"
+"""APDrawingDB's folder of the aligned splits."""
+
+
+def dataset_root(folder: str | Path) -> Path:
+    """The folder that holds the splits: ``folder``, or its ``data/`` when ``folder`` is the root
+    of a data set distributed like APDrawingDB (splits only in ``data/``)."""
     root = Path(folder)
+    inner = root / DATA_FOLDER
+    if not any((root / s).is_dir() for s in SPLITS) and any((inner / s).is_dir() for s in SPLITS):
+        return inner
+    return root
+
+
+def _split_folder(folder: str | Path, split: str) -> Path:
+    root = dataset_root(folder)
     if split not in SPLITS:
         raise WiseError(f"unknown split {split!r}; use one of {', '.join(SPLITS)}")
     if not root.is_dir():

@@ -125,8 +125,12 @@ def _quantile(score: torch.Tensor, q: float) -> torch.Tensor:
 
 
 def _analysed(image: torch.Tensor, rule: Callable[[torch.Tensor], torch.Tensor]) -> torch.Tensor:
-    """``rule`` applied to ``image`` ``(B, 3, H, W)`` reduced to a short side of at most
-    :data:`ANALYSIS_SIDE`, its soft region enlarged bilinearly to ``(B, 1, H, W)``."""
+    """``rule`` applied to each picture of ``image`` ``(B, 3, H, W)`` reduced to a short side of
+    at most :data:`ANALYSIS_SIDE`, its soft region enlarged bilinearly to ``(B, 1, H, W)``.
+    One picture at a time: convolution kernels may round differently for other batch sizes,
+    and a region must not depend on the pictures beside it."""
+    if image.shape[0] > 1:
+        return torch.cat([_analysed(picture, rule) for picture in image.split(1)])
     height, width = image.shape[-2:]
     factor = ANALYSIS_SIDE / min(height, width)
     if factor >= 1.0:
