@@ -117,6 +117,11 @@ def test_init_starts_from_a_local_model_of_the_same_network(pairs: Path, tmp_pat
         assert torch.equal(started.state_dict()[name], value), name
     fresh = _module(LocalSettings("xdog", str(pairs), **network_options)).generator
     assert not torch.equal(fresh.head.bias, donor.head.bias), "without --init the network starts anew"
+    tiny = {"load_size": 64, "crop_size": 64, "steps": 2, "accelerator": "cpu", "gan_weight": 0.0}
+    run = LocalSettings("xdog", str(pairs), init=settings.init, **network_options, **tiny)
+    train_local(run, str(tmp_path / "tuned"), out=open(os.devnull, "w"))
+    recorded = load_model(tmp_path / "tuned" / "model.safetensors", "xdog", "local")[1].settings
+    assert recorded["init"] == "donor.safetensors", "the model names its start, not this machine's folders"
     wider = LocalSettings("xdog", str(pairs), init=settings.init, depth=3, width=16, max_width=16)
     with pytest.raises(WiseError, match="depth 3, max width 16, width 8; give the same --depth"):
         prepare_local(wider, tmp_path / "run", resume=False)
@@ -124,3 +129,21 @@ def test_init_starts_from_a_local_model_of_the_same_network(pairs: Path, tmp_pat
         from wise.train.local_settings import init_model
 
         init_model(LocalSettings("cartoon", str(pairs), init=settings.init, **network_options))
+
+
+def test_the_preset_weight_keeps_the_masks_at_the_start_preset(pairs: Path, tmp_path: Path) -> None:
+    departures = []
+    for weight in (0.0, 20.0):
+        settings = LocalSettings(
+            "xdog", str(pairs), depth=3, width=8, max_width=16, load_size=64, crop_size=64, steps=30, lr=5e-3,
+            lr_schedule="constant", gan_weight=0.0, tv_weight=0.0, preset_weight=weight, accelerator="cpu",
+            checkpoint_every=1000,
+        )  # fmt: skip
+        folder = tmp_path / f"run-{weight:g}"
+        train_local(settings, str(folder), out=open(os.devnull, "w"))
+        network, _ = load_model(folder / "model.safetensors", "xdog", "local")
+        photo = PairDataset(pair_files(pairs, "test"), None, None, flip=False)[0]["photo"][None]
+        with torch.no_grad():
+            masks = network(photo)
+        departures.append(float((masks - start_params(settings).view(1, -1, 1, 1)).abs().mean()))
+    assert departures[1] < 0.5 * departures[0], departures

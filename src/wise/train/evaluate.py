@@ -78,6 +78,8 @@ def translator_baseline(effect: Effect, start: torch.Tensor) -> tuple[torch.Tens
     for name in effect.presets:
         if torch.allclose(effect.preset(name), start, atol=1e-3):
             return start, name
+    if torch.allclose(effect.default_params(), start, atol=1e-3):
+        return start, "defaults"
     return start, "the model's start values"
 
 

@@ -16,7 +16,7 @@ from typing import TextIO
 import lightning as L
 
 from wise.io import atomic_path
-from wise.ppn.modelfile import ModelInfo, load_model, save_model
+from wise.ppn.modelfile import BUILTIN_PREFIX, ModelInfo, load_model, save_model
 from wise.ppn.translation import ARCHITECTURE as TRANSLATOR
 from wise.ppn.translation import translator_options
 from wise.train.engine import fit_run, log_files, trainer_options
@@ -112,12 +112,21 @@ def train_local(
     )
 
 
+def _model_name(model: str | None) -> str | None:
+    """``--init`` as a model file records it: a built-in name, or a file's name (no folders of
+    this machine)."""
+    if model is None or model.startswith(BUILTIN_PREFIX):
+        return model
+    return Path(model).name
+
+
 def _write_results(
     settings: LocalSettings, folder: Path, module: LocalGAN, test_set: PairDataset, summary: dict, out: TextIO
 ) -> None:
     shared = {
         **dataclasses.asdict(settings),
         "pairs": Path(settings.pairs).name,
+        "init": _model_name(settings.init),
         "task": read_task(settings.pairs).get("task"),
         "steps_done": summary["steps"],
         "processes": summary["processes"],
