@@ -18,7 +18,8 @@ import argparse
 from pathlib import Path
 
 import torch
-from PIL import Image, ImageDraw, ImageFont
+from PIL import Image
+from sheet import labelled_sheet
 from skimage import data
 
 import wise
@@ -31,15 +32,8 @@ from wise.train.adaptive import TASKS, task_preset
 
 SHORT_SIDE = 256
 CELL = 220
-GAP = 6
-LABEL_HEIGHT = 22
 PHOTOS = {"contours": "coffee", "details": "chelsea", "background": "astronaut"}
 JPEG_QUALITY = 85
-
-
-def _cell(picture: Image.Image) -> Image.Image:
-    width = round(picture.width * CELL / picture.height)
-    return picture.resize((width, CELL), Image.Resampling.LANCZOS)
 
 
 def _row(task: str, model: str, label: str) -> list[tuple[str, Image.Image]]:
@@ -82,18 +76,7 @@ def main() -> None:
     shipped = {task: f"builtin:{task}" for task in PHOTOS if _shipped(task)}
     models = dict(item.split("=", 1) for item in args.model) or shipped
     rows = [_row(args.task or name, model, name) for name, model in models.items()]
-    cells = [[(label, _cell(picture)) for label, picture in row] for row in rows]
-    width = max(sum(p.width for _, p in row) + GAP * (len(row) - 1) for row in cells)
-    height = len(cells) * (CELL + LABEL_HEIGHT + GAP)
-    sheet = Image.new("RGB", (width, height), "white")
-    draw = ImageDraw.Draw(sheet)
-    font = ImageFont.load_default()
-    for r, row in enumerate(cells):
-        x, y = 0, r * (CELL + LABEL_HEIGHT + GAP)
-        for label, picture in row:
-            draw.text((x + 2, y + 4), label, fill="black", font=font)
-            sheet.paste(picture, (x, y + LABEL_HEIGHT))
-            x += picture.width + GAP
+    sheet = labelled_sheet(rows, CELL)
     sheet.save(args.output, quality=JPEG_QUALITY)
     print(args.output)
 

@@ -15,7 +15,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from PIL import Image, ImageDraw, ImageFont
+from PIL import Image
+from sheet import labelled_sheet
 from skimage import data
 
 from wise.io import image_to_tensor, tensor_to_image
@@ -25,15 +26,12 @@ from wise.train.drawing import draw
 
 SHORT_SIDE = 256
 CELL = 200
-GAP = 6
-LABEL_HEIGHT = 22
 PHOTOS = ("astronaut", "coffee", "chelsea")
 JPEG_QUALITY = 85
 
 
 def _picture(tensor) -> Image.Image:
-    picture = Image.fromarray(tensor_to_image(tensor.clamp(0.0, 1.0)))
-    return picture.resize((round(picture.width * CELL / picture.height), CELL), Image.Resampling.LANCZOS)
+    return Image.fromarray(tensor_to_image(tensor.clamp(0.0, 1.0)))
 
 
 def _square(image):
@@ -62,18 +60,7 @@ def main() -> None:
     for item in args.model:
         label, path = item.split("=", 1)
         models[label] = LocalPredictor(path, model_info(path).effect)
-    rows = [_row(name, models) for name in PHOTOS]
-    width = max(sum(p.width for _, p in row) + GAP * (len(row) - 1) for row in rows)
-    height = len(rows) * (CELL + LABEL_HEIGHT + GAP)
-    sheet = Image.new("RGB", (width, height), "white")
-    pen = ImageDraw.Draw(sheet)
-    font = ImageFont.load_default()
-    for r, row in enumerate(rows):
-        x, y = 0, r * (CELL + LABEL_HEIGHT + GAP)
-        for label, picture in row:
-            pen.text((x + 2, y + 4), label, fill="black", font=font)
-            sheet.paste(picture, (x, y + LABEL_HEIGHT))
-            x += picture.width + GAP
+    sheet = labelled_sheet([_row(name, models) for name in PHOTOS], CELL)
     sheet.save(args.output, quality=JPEG_QUALITY)
     print(args.output)
 
