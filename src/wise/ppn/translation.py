@@ -86,9 +86,22 @@ class Translator(nn.Module):
         origin: tuple[int, int] = (0, 0),
     ) -> Stages:
         """The effect stage and the final image of ``photo`` with ``masks`` (e.g. edited ones)."""
-        stage = photo if self.effect is None else self.effect(photo, masks, scale=scale, origin=origin)
-        result = stage if self.post is None else self.post(stage.clamp(0.0, 1.0))
-        return Stages(masks, stage, result)
+        stage = self.render_stage(photo, masks, scale, origin)
+        return Stages(masks, stage, self.draw(stage))
+
+    def render_stage(
+        self,
+        photo: torch.Tensor,
+        masks: torch.Tensor | None,
+        scale: float | None = None,
+        origin: tuple[int, int] = (0, 0),
+    ) -> torch.Tensor:
+        """The effect's output (the photo itself without an effect)."""
+        return photo if self.effect is None else self.effect(photo, masks, scale=scale, origin=origin)
+
+    def draw(self, stage: torch.Tensor) -> torch.Tensor:
+        """The CNN's image of the effect stage (the stage itself without a CNN)."""
+        return stage if self.post is None else self.post(stage.clamp(0.0, 1.0))
 
     def stages(self, photo: torch.Tensor, scale: float | None = None, origin: tuple[int, int] = (0, 0)) -> Stages:
         return self.finish(photo, self.masks(photo), scale, origin)

@@ -94,19 +94,24 @@ class LocalGAN(L.LightningModule):
         masks = masks.float() if masks is not None else None
         scale = float(batch["scale"][0]) if torch.is_tensor(batch["scale"]) else float(batch["scale"])
         with torch.autocast(self.device.type, enabled=False):
-            return self._finish(photo.float(), masks, scale, batch["origin"])
+            stage = self._stage(photo.float(), masks, scale, batch["origin"])
+        return Stages(masks, stage, self.network.draw(stage))
 
-    def _finish(self, photo: torch.Tensor, masks: torch.Tensor | None, scale: float, origins: torch.Tensor) -> Stages:
+    def _stage(
+        self, photo: torch.Tensor, masks: torch.Tensor | None, scale: float, origins: torch.Tensor
+    ) -> torch.Tensor:
+        """The effect stage in full precision (the effect's steps need it; the CNNs do not)."""
         origins = origins.reshape(-1, 2)
         position_dependent = self.effect is not None and self.effect.position_dependent
         if not position_dependent or bool((origins == origins[:1]).all()):
-            return self.network.finish(photo, masks, scale, (int(origins[0, 0]), int(origins[0, 1])))
+            return self.network.render_stage(photo, masks, scale, (int(origins[0, 0]), int(origins[0, 1])))
         # Textures fixed to the paper: every crop where it lies.
-        parts = [
-            self.network.finish(photo[i : i + 1], masks[i : i + 1], scale, (int(y), int(x)))
-            for i, (y, x) in enumerate(origins.tolist())
-        ]
-        return Stages(*(torch.cat(field) for field in zip(*parts)))
+        return torch.cat(
+            [
+                self.network.render_stage(photo[i : i + 1], masks[i : i + 1], scale, (int(y), int(x)))
+                for i, (y, x) in enumerate(origins.tolist())
+            ]
+        )
 
     def temperature(self) -> float:
         total = self.trainer.estimated_stepping_batches if self._trainer is not None else 0
