@@ -25,7 +25,7 @@ import torch
 import torch.nn.functional as F
 
 from wise.filters import gaussian_blur, resolution_scale
-from wise.filters._checks import check_image
+from wise.filters._checks import REFERENCE_SHORT_SIDE, check_image
 
 LUMA = (0.299, 0.587, 0.114)
 EDGE_SIGMA = 2.0
@@ -73,7 +73,7 @@ def outlines(gray: torch.Tensor) -> torch.Tensor:
 def hatch_lines(height: int, width: int, angle: float, period: float, like: torch.Tensor) -> torch.Tensor:
     """Anti-aliased parallel lines at ``angle`` degrees, ``period`` pixels apart and
     :data:`HATCH_WIDTH` wide at a 512-pixel short side, as coverage ``(1, 1, H, W)``."""
-    scale = min(height, width) / 512
+    scale = min(height, width) / REFERENCE_SHORT_SIDE
     ys = torch.arange(height, dtype=like.dtype, device=like.device).view(-1, 1)
     xs = torch.arange(width, dtype=like.dtype, device=like.device).view(1, -1)
     radians = math.radians(angle)
