@@ -7,6 +7,7 @@ import math
 import torch
 import torch.nn.functional as F
 
+from wise.filters import fused
 from wise.filters._checks import ParamLike, as_map, check_image, max_value, resolution_scale
 from wise.filters.sampling import tap_sum
 
@@ -89,6 +90,10 @@ class _FixedBlurAxis(torch.autograd.Function):
 
 
 def _blur_axis_fixed(image: torch.Tensor, sigma: float, axis: int) -> torch.Tensor:
+    if fused.enabled(image):
+        from wise.filters.fused.gaussian import FixedBlurAxis
+
+        return FixedBlurAxis.apply(image, _fixed_kernel(sigma, image), axis)
     return _FixedBlurAxis.apply(image, _fixed_kernel(sigma, image), axis)
 
 

@@ -1,0 +1,98 @@
+"""Fused CPU kernels for the filters' sample loops, compiled by Numba.
+
+The PyTorch filters of :mod:`wise.filters` set off one full-image tensor per sample and per
+arithmetic step; on the CPU most of their time is memory traffic. Each module here holds the
+same computation as one loop over pixels (forward and an analytic backward), beside the
+PyTorch function it speeds up and under the same names: ``fused/bilateral.py`` accelerates
+``bilateral.py``. The PyTorch path stays the reference (the tests compare with it) and the
+path on every other device.
+
+Which path runs is decided per call by :func:`enabled`: fused on CPU tensors of float32 or
+float64 when Numba is installed, unless the environment variable ``WISE_KERNELS=torch`` asks
+for the PyTorch path. Compiled code is cached on disk (next to the sources, or in Numba's
+per-user cache folder where the package is read-only), so only the first process compiles.
+
+Kernels run on as many threads as PyTorch uses (:func:`torch.get_num_threads`), and one at a
+time: Numba's default thread pool must not be entered by two threads at once (the editor's
+server renders in threads).
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import threading
+from contextlib import contextmanager
+from typing import Iterator
+
+import torch
+
+ENVIRONMENT_VARIABLE = "WISE_KERNELS"
+"""``torch`` selects the PyTorch path everywhere; ``fused`` (or unset) the fused kernels on the CPU."""
+
+FASTMATH = {"nsz", "arcp", "contract", "reassoc"}
+"""LLVM flags for the kernels: reordering and fused multiply-add, but finite-math is not
+assumed (a Gaussian weight may underflow to 0 and a sample may be exactly at the border)."""
+
+_DTYPES = (torch.float32, torch.float64)
+_lock = threading.Lock()
+_numba_found: bool | None = None
+
+
+def numba_available() -> bool:
+    global _numba_found
+    if _numba_found is None:
+        _numba_found = importlib.util.find_spec("numba") is not None
+    return _numba_found
+
+
+def requested() -> str:
+    """The path the environment asks for: ``"torch"`` or ``"fused"``."""
+    value = os.environ.get(ENVIRONMENT_VARIABLE, "fused").strip().lower() or "fused"
+    if value not in ("torch", "fused"):
+        from wise.errors import WiseError
+
+        raise WiseError(f"{ENVIRONMENT_VARIABLE} must be 'torch' or 'fused', got {value!r}")
+    return value
+
+
+def enabled(*tensors: torch.Tensor) -> bool:
+    """Whether the fused kernels compute an operation on ``tensors``: all on the CPU, of one
+    floating-point dtype the kernels compile for, Numba installed and not switched off."""
+    if requested() == "torch" or not numba_available():
+        return False
+    dtype = tensors[0].dtype
+    return all(t.device.type == "cpu" and t.dtype == dtype for t in tensors) and dtype in _DTYPES
+
+
+@contextmanager
+def kernel_threads() -> Iterator[None]:
+    """Run a kernel with PyTorch's thread count, one kernel at a time in the process."""
+    import numba
+
+    with _lock:
+        numba.set_num_threads(max(1, min(torch.get_num_threads(), numba.config.NUMBA_NUM_THREADS)))
+        yield
+
+
+def chunks() -> int:
+    """Number of private accumulators of a backward pass that scatters: one per thread."""
+    import numba
+
+    return max(1, min(torch.get_num_threads(), numba.config.NUMBA_NUM_THREADS))
+
+
+def array(tensor: torch.Tensor):
+    """A contiguous NumPy view (or copy) of a CPU tensor, detached."""
+    return tensor.detach().contiguous().numpy()
+
+
+def full(tensor: torch.Tensor, shape: torch.Size | tuple[int, ...]):
+    """``tensor`` broadcast to ``shape`` as a contiguous NumPy array."""
+    return tensor.detach().expand(shape).contiguous().numpy()
+
+
+def reduce_to(grad: torch.Tensor, shape: torch.Size) -> torch.Tensor:
+    """Sum a gradient over the dimensions that were broadcast from ``shape``."""
+    dims = [i for i, (g, s) in enumerate(zip(grad.shape, shape)) if s == 1 and g != 1]
+    return grad.sum(dim=dims, keepdim=True) if dims else grad
