@@ -50,3 +50,26 @@ def test_tiled_rendering_has_no_seams(name: str, local: bool, astronaut: torch.T
     # identical up to rounding; a hard threshold may flip an isolated pixel
     assert difference.mean() < 1e-3
     assert (difference > 0.05).float().mean() < 1e-3
+
+
+def test_a_guide_made_in_tiles_equals_the_whole_pictures(astronaut: torch.Tensor, monkeypatch) -> None:
+    import wise.render as R
+
+    image = F.interpolate(astronaut, size=(136, 200), mode="area")
+    effect = wise.effects.create("oilpaint")
+    torch.manual_seed(0)
+    params = effect.default_params()[None, :, None, None] + 0.2 * (torch.rand(1, len(effect.param_specs), 5, 7) - 0.5)
+    with torch.no_grad():
+        whole = effect.guide(image, params)
+        monkeypatch.setattr(R, "tile_shape", lambda height, width, halo: (64, 64))
+        tiled = R._guide(effect, image, params, min(image.shape[-2:]) / 512, image.device)
+    assert tiled.shape == (1, effect.guide_channels, 136, 200)
+    difference = (tiled - whole).abs() / float(whole.abs().max())
+    # equal up to float32 rounding, which the deviator's division by a weak anisotropy magnifies
+    assert float(difference.mean()) < 1e-5
+    assert float(difference.max()) < 1e-3
+
+
+def test_an_effect_with_a_guide_reads_less_around_its_tiles() -> None:
+    effect = wise.effects.create("oilpaint")
+    assert effect.halo(8.0) < effect.guide_halo(8.0) / 2

@@ -112,16 +112,44 @@ def render(
     scale = min(height, width) / REFERENCE_SHORT_SIDE
     if (tile is None and height * width <= TILE_PIXELS) or (tile is not None and max(height, width) <= tile):
         return effect(image.to(device), params.to(device), scale=scale).to(image.device)
+    guide = _guide(effect, image, params, scale, device) if effect.guide_channels else None
     halo = _align(effect.halo(scale))
     shape = tile_shape(height, width, halo) if tile is None else (_align(tile), _align(tile))
     out = torch.empty_like(image)
+    for t, crop, crop_params in _tile_inputs(image, params, shape, halo, device):
+        tile_guide = None if guide is None else guide[..., t.py0 : t.py1, t.px0 : t.px1].to(device)
+        result = effect(crop, crop_params, scale=scale, origin=(t.py0, t.px0), guide=tile_guide)
+        out[..., t.y0 : t.y1, t.x0 : t.x1] = _core(result, t).to(out.device)
+    return out
+
+
+def _guide(
+    effect: Effect, image: torch.Tensor, params: torch.Tensor, scale: float, device: torch.device
+) -> torch.Tensor:
+    """The effect's :meth:`~wise.effects.base.Effect.guide` for the whole picture, made in tiles
+    with the guide's own halo, kept on ``image``'s device."""
+    batch, _, height, width = image.shape
+    halo = _align(effect.guide_halo(scale))
+    guide = image.new_empty((batch, effect.guide_channels, height, width))
+    for t, crop, crop_params in _tile_inputs(image, params, tile_shape(height, width, halo), halo, device):
+        result = effect.guide(crop, crop_params, scale=scale, origin=(t.py0, t.px0))
+        guide[..., t.y0 : t.y1, t.x0 : t.x1] = _core(result, t).to(guide.device)
+    return guide
+
+
+def _tile_inputs(
+    image: torch.Tensor, params: torch.Tensor, shape: tuple[int, int], halo: int, device: torch.device
+) -> Iterator[tuple[Tile, torch.Tensor, torch.Tensor]]:
+    """Each tile with its padded crop of the image and of the parameters, on ``device``."""
+    height, width = image.shape[-2:]
     for t in tiles(height, width, shape, halo):
         crop = image[..., t.py0 : t.py1, t.px0 : t.px1].to(device)
         crop_params = (
             params if params.dim() == 2 else masks_for_box(params, (height, width), (t.py0, t.py1, t.px0, t.px1))
         )
-        result = effect(crop, crop_params.to(device), scale=scale, origin=(t.py0, t.px0))
-        out[..., t.y0 : t.y1, t.x0 : t.x1] = result[..., t.y0 - t.py0 : t.y1 - t.py0, t.x0 - t.px0 : t.x1 - t.px0].to(
-            out.device
-        )
-    return out
+        yield t, crop, crop_params.to(device)
+
+
+def _core(result: torch.Tensor, t: Tile) -> torch.Tensor:
+    """The tile's core of a result computed on its padded box."""
+    return result[..., t.y0 - t.py0 : t.y1 - t.py0, t.x0 - t.px0 : t.x1 - t.px0]

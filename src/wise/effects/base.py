@@ -27,6 +27,9 @@ class RenderContext:
 
     scale: float
     origin: tuple[int, int] = (0, 0)
+    guide: torch.Tensor | None = None
+    """This tile's crop of the whole picture's :meth:`Effect.guide`, when the renderer made it
+    beforehand; ``None``: the effect computes it from the tile."""
 
 
 class Effect(nn.Module):
@@ -46,6 +49,8 @@ class Effect(nn.Module):
     name: ClassVar[str]
     param_specs: ClassVar[tuple[ParamSpec, ...]]
     presets: ClassVar[Mapping[str, Mapping[str, float]]] = {}
+    guide_channels: ClassVar[int] = 0
+    """Channels of the effect's :meth:`guide` (0: the effect has none)."""
     position_dependent: ClassVar[bool] = False
     """Whether the look depends on where a tile sits in the picture (textures fixed to the
     paper), so that tiles with other origins must be rendered apart."""
@@ -97,12 +102,43 @@ class Effect(nn.Module):
         *,
         scale: float | None = None,
         origin: tuple[int, int] = (0, 0),
+        guide: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """Stylize ``image`` (B, 3, H, W) in [0, 1] with normalized ``params`` (B, P) or (B, P, h, w).
 
         ``scale`` and ``origin`` describe the whole picture when ``image`` is one tile of it
-        (see :class:`RenderContext`); by default the image is the whole picture.
+        (see :class:`RenderContext`); by default the image is the whole picture. ``guide`` is
+        the tile's crop of :meth:`guide` made on the whole picture (only for effects that have one).
         """
+        values, context = self._prepare(image, params, scale, origin)
+        return self.render(image, values, RenderContext(context.scale, context.origin, guide))
+
+    def guide(
+        self,
+        image: torch.Tensor,
+        params: torch.Tensor,
+        *,
+        scale: float | None = None,
+        origin: tuple[int, int] = (0, 0),
+    ) -> torch.Tensor:
+        """The smooth fields of the picture that the pipeline reads far around each pixel (the
+        flow of oil paint), ``(B, guide_channels, H, W)``. A renderer in tiles makes them once
+        (in tiles of their own, with :meth:`guide_halo`) and hands each tile its crop, so the
+        tiles of the rest need only :meth:`halo`. Arguments as :meth:`forward`."""
+        values, context = self._prepare(image, params, scale, origin)
+        return self.render_guide(image, values, context)
+
+    def render_guide(self, image: torch.Tensor, p: Mapping[str, torch.Tensor], ctx: RenderContext) -> torch.Tensor:
+        """The guide's stages, on parameters in real units."""
+        raise NotImplementedError(f"effect {self.name!r} has no guide")
+
+    def guide_halo(self, scale: float) -> int:
+        """How many pixels around a tile :meth:`guide` reads at ``scale`` (an upper bound)."""
+        raise NotImplementedError(f"effect {self.name!r} has no guide")
+
+    def _prepare(
+        self, image: torch.Tensor, params: torch.Tensor, scale: float | None, origin: tuple[int, int]
+    ) -> tuple[dict[str, torch.Tensor], RenderContext]:
         if not isinstance(image, torch.Tensor) or image.dim() != 4 or image.shape[1] != 3:
             shape = tuple(image.shape) if isinstance(image, torch.Tensor) else type(image).__name__
             raise WiseError(f"image must be a (B, 3, H, W) tensor, got {shape}")
@@ -117,14 +153,15 @@ class Effect(nn.Module):
         values = P.real_maps(params, self.param_specs, tuple(image.shape[-2:]))
         if scale is None:
             scale = min(image.shape[-2:]) / REFERENCE_SHORT_SIDE
-        return self.render(image, values, RenderContext(scale, origin))
+        return values, RenderContext(scale, origin)
 
     def render(self, image: torch.Tensor, p: Mapping[str, torch.Tensor], ctx: RenderContext) -> torch.Tensor:
         """The pipeline, on parameters in real units (see the class docstring)."""
         raise NotImplementedError
 
     def halo(self, scale: float) -> int:
-        """How many pixels around a tile the pipeline reads at ``scale`` (an upper bound)."""
+        """How many pixels around a tile the pipeline reads at ``scale`` (an upper bound), given
+        the tile's crop of the :meth:`guide` where the effect has one."""
         raise NotImplementedError
 
     def stage(self, fn: Callable[..., torch.Tensor], *args: object, **kwargs: object) -> torch.Tensor:

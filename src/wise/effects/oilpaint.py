@@ -96,6 +96,7 @@ class OilPaint(Effect):
 
     name = "oilpaint"
     position_dependent = True
+    guide_channels = 3
     param_specs = (
         ParamSpec("brightness", -0.2, 0.3, 0.0, "added to the input colours"),
         ParamSpec("contrast", 0.5, 2.0, 1.1, "contrast of the input around mid-grey"),
@@ -153,16 +154,22 @@ class OilPaint(Effect):
         super().__init__(kernel_size, checkpoint)
         self.seed = seed
 
+    def guide_halo(self, scale: float) -> int:
+        return math.ceil(self._flow_reach(scale)) + 4
+
     def halo(self, scale: float) -> int:
-        flow_reach = (
-            FLOW_DERIVATIVE + SUPPORT * (max(FLOW_SMOOTHING + RELAX_SIGMA, COARSE_FLOW_BLUR + WIDE_FLOW_SIGMA))
-        ) * scale
         stroke_spec, brush_spec = self.spec("stroke_length"), self.spec("brush_size")
         texture_reach = SUPPORT * (stroke_spec.max + brush_spec.max) * scale
         abstraction_reach = ABSTRACTION_FACTOR * (2 * 2 * 2 * self.kernel_size * math.sqrt(2.0) + 4)
         edge_reach = SUPPORT * 2 * EDGE_SIGMA * scale
         variation_reach = SUPPORT * VARIATION_SIGMA * scale
-        return math.ceil(flow_reach + max(texture_reach, abstraction_reach + variation_reach, edge_reach)) + 4
+        return math.ceil(max(texture_reach, abstraction_reach + variation_reach, edge_reach)) + 4
+
+    @staticmethod
+    def _flow_reach(scale: float) -> float:
+        """Pixels the relaxed structure tensor reads around a pixel."""
+        relaxation_reach = max(FLOW_SMOOTHING + RELAX_SIGMA, COARSE_FLOW_BLUR + WIDE_FLOW_SIGMA)
+        return (FLOW_DERIVATIVE + SUPPORT * relaxation_reach) * scale
 
     def paint_height(
         self, tangent: torch.Tensor, stroke_length: torch.Tensor, brush_size: torch.Tensor, ctx: RenderContext
@@ -174,15 +181,16 @@ class OilPaint(Effect):
         grooves = self.stage(flow_smoothing, strokes, across, brush_size, MAX_STROKE_STEPS, ctx.scale)
         return BRISTLE_GAIN * grooves
 
-    def render(self, image: torch.Tensor, p: Mapping[str, torch.Tensor], ctx: RenderContext) -> torch.Tensor:
-        sigmas = detail_sigmas(p["details"])
-        scale = ctx.scale
-
+    def render_guide(self, image: torch.Tensor, p: Mapping[str, torch.Tensor], ctx: RenderContext) -> torch.Tensor:
+        """The relaxed structure tensor, whose flow the strokes follow: it reads far (the picture's
+        structure at a coarse scale), so a renderer in tiles makes it once for the whole picture."""
         adjusted = self.recomputed(adjust_color, image, **colour_adjustments(p))
-        lab = self.recomputed(rgb_to_lab, adjusted)
+        return self._structure(self.recomputed(rgb_to_lab, adjusted), ctx.scale)
+
+    def _structure(self, lab: torch.Tensor, scale: float) -> torch.Tensor:
         local = self.stage(smoothed_structure_tensor, lab[:, :1], FLOW_DERIVATIVE, FLOW_SMOOTHING, scale)
         coarse = self.stage(coarse_structure_tensor, lab[:, :1], COARSE_FLOW_BLUR, FLOW_DERIVATIVE, scale)
-        structure = self.stage(
+        return self.stage(
             relaxed_structure_tensor,
             local * (scale * scale),
             coarse * (scale * scale),
@@ -192,6 +200,14 @@ class OilPaint(Effect):
             WIDE_FLOW_SIGMA,
             scale,
         )
+
+    def render(self, image: torch.Tensor, p: Mapping[str, torch.Tensor], ctx: RenderContext) -> torch.Tensor:
+        sigmas = detail_sigmas(p["details"])
+        scale = ctx.scale
+
+        adjusted = self.recomputed(adjust_color, image, **colour_adjustments(p))
+        lab = self.recomputed(rgb_to_lab, adjusted)
+        structure = self._structure(lab, scale) if ctx.guide is None else ctx.guide
         tangent = self.stage(edge_tangent_flow, structure)
 
         low_lab = downsample(lab, ABSTRACTION_FACTOR)
