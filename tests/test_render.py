@@ -73,3 +73,28 @@ def test_a_guide_made_in_tiles_equals_the_whole_pictures(astronaut: torch.Tensor
 def test_an_effect_with_a_guide_reads_less_around_its_tiles() -> None:
     effect = wise.effects.create("oilpaint")
     assert effect.halo(8.0) < effect.guide_halo(8.0) / 2
+
+
+@pytest.mark.parametrize("name", wise.effects.available())
+def test_rerendering_a_painted_region_equals_a_whole_render(name: str, astronaut: torch.Tensor) -> None:
+    from wise.render import rerender
+
+    image = F.interpolate(astronaut, size=(256, 320), mode="area")
+    effect = wise.effects.create(name)
+    before = effect.preset(next(iter(effect.presets)))[None, :, None, None].expand(1, -1, 128, 160).clone()
+    after = before.clone()
+    after[0, 0, 60:70, 20:34] += 0.3  # a stroke on the first parameter
+    with torch.no_grad():
+        rendered = render(effect, image, before)
+        whole = render(effect, image, after)
+    sizes = []
+    original = effect.forward
+    effect.forward = lambda crop, *a, **k: sizes.append(crop.shape[-2:]) or original(crop, *a, **k)
+    updated = rerender(effect, image, after, before, rendered)
+    difference = (updated - whole).abs()
+    assert difference.mean() < 1e-4
+    assert (difference > 0.05).float().mean() < 1e-3
+    assert len(sizes) == 1
+    if not effect.guide_channels:  # oil paint's flow reaches across this small picture: it is drawn whole
+        assert sizes[0][0] * sizes[0][1] < 0.5 * 256 * 320  # only a crop was rendered
+    assert torch.equal(rerender(effect, image, after, after, updated), updated)  # nothing changed: nothing drawn

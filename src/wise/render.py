@@ -153,3 +153,74 @@ def _tile_inputs(
 def _core(result: torch.Tensor, t: Tile) -> torch.Tensor:
     """The tile's core of a result computed on its padded box."""
     return result[..., t.y0 - t.py0 : t.y1 - t.py0, t.x0 - t.px0 : t.x1 - t.px0]
+
+
+def changed_box(params: torch.Tensor, before: torch.Tensor, size: tuple[int, int]) -> tuple[int, int, int, int] | None:
+    """The box ``(y0, y1, x0, x1)`` of the picture of ``size`` over which the masks ``params``
+    differ from ``before`` (both ``(B, P, h, w)``), widened by the footprint of a mask pixel;
+    ``None`` where they are equal."""
+    differs = (params != before).flatten(0, 1).any(dim=0)
+    if not bool(differs.any()):
+        return None
+    rows, columns = differs.any(dim=1).nonzero().flatten(), differs.any(dim=0).nonzero().flatten()
+    (height, width), (mask_h, mask_w) = size, params.shape[-2:]
+    # a mask pixel is read by the bilinear resampling up to one mask pixel beyond its own area
+    return (
+        max(0, (int(rows[0]) - 1) * height // mask_h),
+        min(height, -(-(int(rows[-1]) + 2) * height // mask_h)),
+        max(0, (int(columns[0]) - 1) * width // mask_w),
+        min(width, -(-(int(columns[-1]) + 2) * width // mask_w)),
+    )
+
+
+REDRAW_FRACTION = 0.5
+"""Above this fraction of the picture, :func:`rerender` renders the whole picture again."""
+
+
+@torch.no_grad()
+def rerender(
+    effect: Effect, image: torch.Tensor, params: torch.Tensor, before: torch.Tensor, rendered: torch.Tensor
+) -> torch.Tensor:
+    """``render(effect, image, params)`` given ``rendered``, the render with the masks ``before``:
+    only the pixels that the changed part of the masks can reach are rendered again, from a crop
+    with the pixels the pipeline reads around them (a painted stroke costs a fraction of a render).
+
+    ``params`` and ``before`` are masks ``(B, P, h, w)`` of the same shape; the result equals a
+    whole render up to floating-point rounding, like a render in tiles.
+    """
+    height, width = image.shape[-2:]
+    if params.dim() != 4 or params.shape != before.shape or height * width > TILE_PIXELS:
+        return render(effect, image, params)
+    box = changed_box(params, before, (height, width))
+    if box is None:
+        return rendered.clone()
+    scale = min(height, width) / REFERENCE_SHORT_SIDE
+    reach = effect.halo(scale) + (effect.guide_halo(scale) if effect.guide_channels else 0)
+    y0, y1, x0, x1 = (
+        max(0, box[0] - reach),
+        min(height, box[1] + reach),
+        max(0, box[2] - reach),
+        min(width, box[3] + reach),
+    )
+    crop = Tile(
+        y0,
+        y1,
+        x0,
+        x1,
+        max(0, y0 - reach) // TILE_ALIGNMENT * TILE_ALIGNMENT,
+        min(height, y1 + reach),
+        max(0, x0 - reach) // TILE_ALIGNMENT * TILE_ALIGNMENT,
+        min(width, x1 + reach),
+    )
+    if (crop.py1 - crop.py0) * (crop.px1 - crop.px0) > REDRAW_FRACTION * height * width:
+        return render(effect, image, params)
+    masks = check_params(params, effect.param_specs, image.shape[0])
+    result = effect(
+        image[..., crop.py0 : crop.py1, crop.px0 : crop.px1],
+        masks_for_box(masks, (height, width), (crop.py0, crop.py1, crop.px0, crop.px1)),
+        scale=scale,
+        origin=(crop.py0, crop.px0),
+    )
+    out = rendered.clone()
+    out[..., y0:y1, x0:x1] = _core(result, crop)
+    return out

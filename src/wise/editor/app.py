@@ -311,8 +311,8 @@ def create_app(
 
     @app.get("/api/preview")
     def preview(s: Session) -> Response:
-        snapshot = s.snapshot()
-        with render_lock:
+        with render_lock:  # the state when its turn comes: a request that waited is not drawn stale
+            snapshot = s.snapshot()
             png = s.render_preview(snapshot)
         return Response(png, media_type="image/png", headers={"X-Wise-Version": str(snapshot.version)})
 

@@ -33,7 +33,7 @@ from wise.io import decode_image_bytes, pixel_limit, tensor_to_image, write_imag
 from wise.paramfile import effect_of, load_params, save_params
 from wise.params import resize_masks, to_real
 from wise.ppn.predictor import LocalPredictor
-from wise.render import render
+from wise.render import render, rerender
 
 PREVIEW_SHORT_SIDE = 512
 """Short side of the preview and of the masks made for an image without a parameter file."""
@@ -79,6 +79,18 @@ class Snapshot:
     effect: Effect
     masks: torch.Tensor
     content: Content | None
+
+
+@dataclass
+class _Drawn:
+    """The last preview drawn: what it was drawn from, so that the next one redraws only what changed."""
+
+    version: int
+    effect: Effect
+    content: Content
+    masks: torch.Tensor
+    result: torch.Tensor
+    png: bytes
 
 
 @contextlib.contextmanager
@@ -176,6 +188,7 @@ class EditorSession:
     _undo: list[_Change] = field(default_factory=list)
     _redo: list[_Change] = field(default_factory=list)
     _lock: threading.RLock = field(default_factory=threading.RLock)
+    _drawn: _Drawn | None = None
 
     def __post_init__(self) -> None:
         if self.masks.numel() == 0:
@@ -374,12 +387,33 @@ class EditorSession:
         return snapshot.content
 
     def render_preview(self, snapshot: Snapshot) -> bytes:
-        """The stylized preview of a snapshot as PNG."""
+        """The stylized preview of a snapshot as PNG.
+
+        After a stroke only the part of the last preview that the painted region reaches is
+        drawn again (:func:`wise.render.rerender`); a snapshot of the state last drawn is not
+        drawn again. Callers render one preview at a time (the server's render lock).
+        """
         content = self._require_content(snapshot)
-        made = self._stylize(snapshot.effect, content.preview, snapshot.masks)
-        if made.shape[-2:] != content.preview.shape[-2:]:
-            made = F.interpolate(made, size=content.preview.shape[-2:], mode="bilinear", align_corners=False)
-        return preview_png(made.clamp(0.0, 1.0))
+        drawn = self._drawn
+        if drawn is not None and (drawn.version, drawn.effect, drawn.content) == (
+            snapshot.version,
+            snapshot.effect,
+            content,
+        ):
+            return drawn.png
+        if self.translator is not None and self.translator.info.effect == snapshot.effect.name:
+            made = self._stylize(snapshot.effect, content.preview, snapshot.masks)
+            if made.shape[-2:] != content.preview.shape[-2:]:
+                made = F.interpolate(made, size=content.preview.shape[-2:], mode="bilinear", align_corners=False)
+            return preview_png(made.clamp(0.0, 1.0))
+        effect = snapshot.effect.eval()
+        if drawn is not None and drawn.effect is snapshot.effect and drawn.content is content:
+            made = rerender(effect, content.preview, snapshot.masks, drawn.masks, drawn.result)
+        else:
+            made = render(effect, content.preview, snapshot.masks)
+        png = preview_png(made.clamp(0.0, 1.0))
+        self._drawn = _Drawn(snapshot.version, snapshot.effect, content, snapshot.masks, made, png)
+        return png
 
     def content_preview(self) -> bytes:
         content = self._require_content(self.snapshot())
