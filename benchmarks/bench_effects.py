@@ -20,7 +20,14 @@ import time
 
 
 def run_case(
-    effect_name: str, size: int, mode: str, local: bool, repeat: int, kernel_size: int, checkpoint: bool
+    effect_name: str,
+    size: int,
+    mode: str,
+    local: bool,
+    repeat: int,
+    kernel_size: int,
+    checkpoint: bool,
+    batch: int = 1,
 ) -> dict:
     import torch
     import torch.nn.functional as F
@@ -31,8 +38,9 @@ def run_case(
     torch.manual_seed(0)
     photo = torch.from_numpy(data.astronaut()).permute(2, 0, 1)[None].float() / 255.0
     image = F.interpolate(photo, size=(size, size), mode="bilinear", align_corners=False)
+    image = image.expand(batch, -1, -1, -1).contiguous()
     effect = wise.effects.create(effect_name, kernel_size=kernel_size, checkpoint=checkpoint)
-    base = effect.default_params()[None]
+    base = effect.default_params()[None].expand(batch, -1)
     params = base[:, :, None, None].expand(-1, -1, 64, 64).clone() if local else base.clone()
 
     def once() -> None:
@@ -54,6 +62,7 @@ def run_case(
     return {
         "effect": effect_name,
         "size": size,
+        "batch": batch,
         "mode": mode,
         "params": "local" if local else "global",
         "seconds": min(times),
@@ -67,6 +76,7 @@ def main() -> None:
     parser.add_argument("--effects", nargs="+", default=["xdog"])
     parser.add_argument("--sizes", nargs="+", type=int, default=[512, 1024])
     parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--batch", type=int, default=1, help="pictures per call (the same photo repeated)")
     parser.add_argument("--kernel-size", type=int, default=3)
     parser.add_argument("--checkpoint", action="store_true")
     parser.add_argument("--markdown", action="store_true", help="print a Markdown table")
@@ -89,6 +99,7 @@ def main() -> None:
                     repeat=args.repeat,
                     kernel_size=args.kernel_size,
                     checkpoint=args.checkpoint,
+                    batch=args.batch,
                 )
                 out = subprocess.run(
                     [sys.executable, __file__, "--case", json.dumps(case)], capture_output=True, text=True, check=True

@@ -61,7 +61,7 @@ def test_a_guide_made_in_tiles_equals_the_whole_pictures(astronaut: torch.Tensor
     params = effect.default_params()[None, :, None, None] + 0.2 * (torch.rand(1, len(effect.param_specs), 5, 7) - 0.5)
     with torch.no_grad():
         whole = effect.guide(image, params)
-        monkeypatch.setattr(R, "tile_shape", lambda height, width, halo: (64, 64))
+        monkeypatch.setattr(R, "tile_shape", lambda height, width, halo, budget: (64, 64))
         tiled = R._guide(effect, image, params, min(image.shape[-2:]) / 512, image.device)
     assert tiled.shape == (1, effect.guide_channels, 136, 200)
     difference = (tiled - whole).abs() / float(whole.abs().max())

@@ -19,8 +19,6 @@ from wise.effects.base import Effect
 from wise.filters._checks import REFERENCE_SHORT_SIDE
 from wise.params import check_params
 
-TILE_PIXELS = 9_000_000
-"""Most pixels of a padded tile: bounds the memory of a render (a few GB for every effect)."""
 MAX_SPLITS = 64
 """Most tiles along one side considered when choosing the tile layout."""
 TILE_ALIGNMENT = 8
@@ -57,7 +55,7 @@ def _align(value: int) -> int:
     return -(-value // TILE_ALIGNMENT) * TILE_ALIGNMENT
 
 
-def tile_shape(height: int, width: int, halo: int, max_pixels: int = TILE_PIXELS) -> tuple[int, int]:
+def tile_shape(height: int, width: int, halo: int, max_pixels: int) -> tuple[int, int]:
     """The core (rows, columns) that covers the picture with the fewest pixels processed,
     halos included, while no padded tile exceeds ``max_pixels`` (strips when that is cheapest)."""
     best: tuple[int, tuple[int, int]] | None = None
@@ -102,7 +100,7 @@ def render(
     """Render ``effect`` on ``image`` (B, 3, H, W) without autograd, in tiles when it is large.
 
     ``tile`` forces square cores of that size; by default the layout processes the fewest
-    pixels with no padded tile above :data:`TILE_PIXELS`. Memory stays that of one padded
+    pixels with no padded tile above the effect's ``tile_pixels``. Memory stays that of one padded
     tile; the result, on ``image``'s device, equals rendering the whole picture at once up
     to floating-point rounding.
     """
@@ -110,11 +108,11 @@ def render(
     batch, _, height, width = image.shape
     params = check_params(params, effect.param_specs, batch)
     scale = min(height, width) / REFERENCE_SHORT_SIDE
-    if (tile is None and height * width <= TILE_PIXELS) or (tile is not None and max(height, width) <= tile):
+    if (tile is None and height * width <= effect.tile_pixels) or (tile is not None and max(height, width) <= tile):
         return effect(image.to(device), params.to(device), scale=scale).to(image.device)
     guide = _guide(effect, image, params, scale, device) if effect.guide_channels else None
     halo = _align(effect.halo(scale))
-    shape = tile_shape(height, width, halo) if tile is None else (_align(tile), _align(tile))
+    shape = tile_shape(height, width, halo, effect.tile_pixels) if tile is None else (_align(tile), _align(tile))
     out = torch.empty_like(image)
     for t, crop, crop_params in _tile_inputs(image, params, shape, halo, device):
         tile_guide = None if guide is None else guide[..., t.py0 : t.py1, t.px0 : t.px1].to(device)
@@ -131,7 +129,9 @@ def _guide(
     batch, _, height, width = image.shape
     halo = _align(effect.guide_halo(scale))
     guide = image.new_empty((batch, effect.guide_channels, height, width))
-    for t, crop, crop_params in _tile_inputs(image, params, tile_shape(height, width, halo), halo, device):
+    for t, crop, crop_params in _tile_inputs(
+        image, params, tile_shape(height, width, halo, effect.guide_tile_pixels), halo, device
+    ):
         result = effect.guide(crop, crop_params, scale=scale, origin=(t.py0, t.px0))
         guide[..., t.y0 : t.y1, t.x0 : t.x1] = _core(result, t).to(guide.device)
     return guide
@@ -189,7 +189,7 @@ def rerender(
     whole render up to floating-point rounding, like a render in tiles.
     """
     height, width = image.shape[-2:]
-    if params.dim() != 4 or params.shape != before.shape or height * width > TILE_PIXELS:
+    if params.dim() != 4 or params.shape != before.shape or height * width > effect.tile_pixels:
         return render(effect, image, params)
     box = changed_box(params, before, (height, width))
     if box is None:

@@ -49,8 +49,13 @@ class Effect(nn.Module):
     name: ClassVar[str]
     param_specs: ClassVar[tuple[ParamSpec, ...]]
     presets: ClassVar[Mapping[str, Mapping[str, float]]] = {}
+    tile_pixels: ClassVar[int] = 9_000_000
+    """Most pixels of a padded tile when a large picture is rendered in tiles: bounds the memory
+    of a render to a few GB (fewer for effects that keep more intermediate images per pixel)."""
     guide_channels: ClassVar[int] = 0
     """Channels of the effect's :meth:`guide` (0: the effect has none)."""
+    guide_tile_pixels: ClassVar[int] = 9_000_000
+    """Most pixels of a padded tile of the :meth:`guide` (a few stages: little memory per pixel)."""
     position_dependent: ClassVar[bool] = False
     """Whether the look depends on where a tile sits in the picture (textures fixed to the
     paper), so that tiles with other origins must be rendered apart."""

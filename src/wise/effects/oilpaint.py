@@ -97,6 +97,7 @@ class OilPaint(Effect):
     name = "oilpaint"
     position_dependent = True
     guide_channels = 3
+    tile_pixels = 5_000_000  # about 0.6 KB per pixel of intermediate images: within 4 GB at 4096²
     param_specs = (
         ParamSpec("brightness", -0.2, 0.3, 0.0, "added to the input colours"),
         ParamSpec("contrast", 0.5, 2.0, 1.1, "contrast of the input around mid-grey"),
