@@ -16,6 +16,7 @@ the total time as a markdown table.
 from __future__ import annotations
 
 import argparse
+import math
 import random
 import socket
 import statistics
@@ -61,14 +62,35 @@ def free_port() -> int:
         return probe.getsockname()[1]
 
 
-def make_strokes(seed: int, count: int, names: list[str], ranges: list[tuple[float, float]]) -> list[dict]:
-    """``count`` varied strokes: any parameter, mode, size, place."""
+DRAG_STEP = (0.005, 0.03)
+"""Distance between a drag's successive points (fractions of the image), as a mouse reports them."""
+
+
+def drag(rng: random.Random, count: int) -> list[list[float]]:
+    """A brush drag of ``count`` points: a walk from a random place that turns gradually."""
+    x, y, heading = rng.random(), rng.random(), rng.uniform(0.0, 2.0 * math.pi)
+    points = [[x, y]]
+    for _ in range(count - 1):
+        heading += rng.gauss(0.0, 0.4)
+        step = rng.uniform(*DRAG_STEP)
+        x = min(1.0, max(0.0, x + step * math.cos(heading)))
+        y = min(1.0, max(0.0, y + step * math.sin(heading)))
+        points.append([x, y])
+    return points
+
+
+def make_strokes(
+    seed: int, count: int, names: list[str], ranges: list[tuple[float, float]], scattered: bool = False
+) -> list[dict]:
+    """``count`` varied strokes: any parameter, mode, size, place; each a drag of up to 40 points
+    (``scattered``: points anywhere in the image, every stroke spanning most of it)."""
     rng = random.Random(seed)
     strokes = []
     for _ in range(count):
         index = rng.randrange(len(names))
         low, high = ranges[index]
-        points = [[rng.random(), rng.random()] for _ in range(rng.randint(1, 40))]
+        length = rng.randint(1, 40)
+        points = [[rng.random(), rng.random()] for _ in range(length)] if scattered else drag(rng, length)
         stroke = {"param": names[index], "points": points, "radius": rng.uniform(0.02, 0.2)}
         stroke.update(hardness=rng.random(), mode=rng.choice(["increase", "decrease", "set"]))
         stroke.update(amount=rng.uniform(0.05, 1.0), value=rng.uniform(low, high))
@@ -129,6 +151,9 @@ def main() -> None:
     parser.add_argument("--strokes", type=int, default=50)
     parser.add_argument("--effect", default="xdog")
     parser.add_argument("--size", type=int, default=512)
+    parser.add_argument(
+        "--scattered", action="store_true", help="strokes of points scattered over the whole image instead of drags"
+    )
     args = parser.parse_args()
 
     with tempfile.TemporaryDirectory() as folder:
@@ -137,7 +162,7 @@ def main() -> None:
         template = initial_session(str(photo), effect=args.effect)
         names = template.effect.param_names
         ranges = [(spec.min, spec.max) for spec in template.effect.param_specs]
-        browsers = [Browser(make_strokes(k, args.strokes, names, ranges)) for k in range(args.sessions)]
+        browsers = [Browser(make_strokes(k, args.strokes, names, ranges, args.scattered)) for k in range(args.sessions)]
         port = free_port()
         server = start_server(photo, port, args.effect)
         try:
@@ -167,12 +192,13 @@ def main() -> None:
 
     strokes = [t for b in browsers for t in b.stroke_seconds]
     previews = [t for b in browsers for t in b.preview_seconds]
+    both = [a + b for browser in browsers for a, b in zip(browser.stroke_seconds, browser.preview_seconds)]
     requests = len(strokes) + len(previews)
     print(f"{args.sessions} sessions x {args.strokes} strokes + previews, {args.effect}, {args.size}x{args.size}")
     print()
     print("| request | count | median | 95th percentile |")
     print("| --- | --- | --- | --- |")
-    for name, seconds in (("stroke", strokes), ("preview", previews)):
+    for name, seconds in (("stroke", strokes), ("preview", previews), ("stroke + preview", both)):
         print(
             f"| {name} | {len(seconds)} | {statistics.median(seconds) * 1000:.0f} ms "
             f"| {percentile(seconds, 0.95) * 1000:.0f} ms |"
