@@ -7,6 +7,7 @@ import math
 import torch
 import torch.nn.functional as F
 
+from wise.filters import fused
 from wise.filters._checks import ParamLike, as_map, check_image, max_value
 from wise.filters.flow import flow_filter_inputs, pixel_step, spaced_samples, trace_streamlines
 from wise.filters.gaussian import SUPPORT, in_support
@@ -171,9 +172,17 @@ def flow_smoothing(
     """
     s, sigma_px = flow_filter_inputs(image, tangent, sigma, scale)
     step_length, steps = spaced_samples(SUPPORT * max_value(sigma_px), max_steps, max(1.0, s))
-    grids = trace_streamlines(tangent.detach(), steps, step_length)
-
     neg_inv_two_sigma_sq = -0.5 / sigma_px.square()
+
+    if fused.enabled(image, tangent, sigma_px):
+        from wise.filters.fused.dog import FlowSmoothingTaps
+
+        total, norm = FlowSmoothingTaps.apply(
+            image, tangent.detach(), sigma_px, neg_inv_two_sigma_sq, steps, step_length, SUPPORT
+        )
+        return (image + total) / (1.0 + norm)
+
+    grids = trace_streamlines(tangent.detach(), steps, step_length)
 
     def tap(k: int, image, sigma_px, neg_inv_two_sigma_sq):
         distance = (k % steps + 1) * step_length

@@ -3,8 +3,8 @@
 The PyTorch filters of :mod:`wise.filters` set off one full-image tensor per sample and per
 arithmetic step; on the CPU most of their time is memory traffic. Each module here holds the
 same computation as one loop over pixels (forward and an analytic backward), beside the
-PyTorch function it speeds up and under the same names: ``fused/bilateral.py`` accelerates
-``bilateral.py``. The PyTorch path stays the reference (the tests compare with it) and the
+PyTorch function it speeds up and under the same names: ``fused/gaussian.py`` accelerates
+``gaussian.py``. The PyTorch path stays the reference (the tests compare with it) and the
 path on every other device.
 
 Which path runs is decided per call by :func:`enabled`: fused on CPU tensors of float32 or

@@ -1,0 +1,197 @@
+"""Fused CPU kernels of :mod:`wise.filters.dog`: the line-integral smoothing along the flow.
+
+:func:`wise.filters.dog.flow_smoothing` sums Gaussian-weighted bilinear samples along each
+pixel's streamline (line integral convolution, Cabral & Leedom 1993): Euler steps of
+``step_length`` pixels along the tangent, each step's tangent sampled where the last one
+landed and flipped to agree with it. The PyTorch path traces every streamline as
+``2 * steps`` full-image grids and sums one full-image tensor per sample; here each pixel
+traces its own streamline and keeps its sums in registers. Backward traces again and gives
+the gradients of the image and of the Gaussian's coefficient ``-1 / (2 sigma^2)`` (the
+streamline geometry is fixed, as on the PyTorch path).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+from numba import njit, prange
+
+from wise.filters.fused import FASTMATH, chunks, full, kernel_threads, reduce_to
+from wise.filters.fused.bilinear import interpolate, locate, scatter
+
+_MIN_TANGENT_LENGTH = 1e-6
+
+
+@njit(inline="always")
+def _weight_recurrence(coefficient: float, step_length: float) -> tuple[float, float, float]:
+    """``w_1``, ``w_2 / w_1`` and the constant ratio of successive ratios of the weights
+    ``w_k = exp((k L)^2 a)``: each next weight is a product, not an exponential."""
+    unit = step_length * step_length * coefficient
+    return math.exp(unit), math.exp(3.0 * unit), math.exp(2.0 * unit)
+
+
+LANES = 16
+"""Pixels of a row whose streamlines are traced together: each streamline is a long chain of
+dependent steps (a step's heading is sampled where the last one landed), so the processor
+needs several independent ones at once to keep busy."""
+
+
+@njit(inline="always")
+def _step(image, tangent, b, px, py, hx, hy, step_length, width, height):
+    """One Euler step: the new position, its bilinear corners and the next heading."""
+    px += hx * step_length
+    py += hy * step_length
+    x0, x1, fx, _ = locate(px, width)
+    y0, y1, fy, _ = locate(py, height)
+    sx = interpolate(tangent, b, 0, y0, y1, x0, x1, fy, fx)
+    sy = interpolate(tangent, b, 1, y0, y1, x0, x1, fy, fx)
+    flip = -1.0 if sx * hx + sy * hy < 0.0 else 1.0
+    scale = flip / max(math.sqrt(sx * sx + sy * sy), _MIN_TANGENT_LENGTH)
+    return px, py, x0, x1, fx, y0, y1, fy, sx * scale, sy * scale
+
+
+@njit(inline="always")
+def _samples_needed(sigma, b, y, start, count, steps, step_length, support) -> int:
+    """Steps within the support of the widest Gaussian of a group of pixels (at least one)."""
+    widest = 0.0
+    for i in range(count):
+        widest = max(widest, support * sigma[b, 0, y, start + i])
+    return max(1, min(steps, int(widest / step_length)))
+
+
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
+def _smoothing_forward(image, tangent, sigma, coefficient, steps, step_length, support, total, norm):
+    batch, channels, height, width = image.shape
+    for row in prange(batch * height):
+        b, y = row // height, row % height
+        px, py, hx, hy = np.empty(LANES), np.empty(LANES), np.empty(LANES), np.empty(LANES)
+        weight, growth, ratio_step, reach = np.empty(LANES), np.empty(LANES), np.empty(LANES), np.empty(LANES)
+        sums, weight_sums = np.empty((channels, LANES)), np.empty(LANES)
+        for start in range(0, width, LANES):
+            count = min(LANES, width - start)
+            needed = _samples_needed(sigma, b, y, start, count, steps, step_length, support)
+            sums[:] = 0.0
+            weight_sums[:] = 0.0
+            for sign in (1.0, -1.0):
+                for i in range(count):
+                    x = start + i
+                    px[i], py[i] = x, y
+                    hx[i], hy[i] = sign * tangent[b, 0, y, x], sign * tangent[b, 1, y, x]
+                    weight[i], growth[i], ratio_step[i] = _weight_recurrence(coefficient[b, 0, y, x], step_length)
+                    reach[i] = support * sigma[b, 0, y, x]
+                for k in range(needed):
+                    distance = (k + 1) * step_length
+                    for i in range(count):
+                        px[i], py[i], x0, x1, fx, y0, y1, fy, hx_next, hy_next = _step(
+                            image, tangent, b, px[i], py[i], hx[i], hy[i], step_length, width, height
+                        )
+                        hx[i], hy[i] = hx_next, hy_next
+                        if k == 0 or distance <= reach[i]:
+                            for c in range(channels):
+                                sums[c, i] += weight[i] * interpolate(image, b, c, y0, y1, x0, x1, fy, fx)
+                            weight_sums[i] += weight[i]
+                        weight[i] *= growth[i]
+                        growth[i] *= ratio_step[i]
+            for i in range(count):
+                for c in range(channels):
+                    total[b, c, y, start + i] = sums[c, i]
+                norm[b, 0, y, start + i] = weight_sums[i]
+
+
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
+def _smoothing_backward(
+    image, tangent, sigma, coefficient, steps, step_length, support, grad_total, grad_norm, g_image_parts, g_coefficient
+):
+    batch, channels, height, width = image.shape
+    parts = g_image_parts.shape[0]
+    rows = batch * height
+    for part in prange(parts):
+        g_image = g_image_parts[part]
+        g_image[:] = 0.0
+        px, py, hx, hy = np.empty(LANES), np.empty(LANES), np.empty(LANES), np.empty(LANES)
+        weight, growth, ratio_step, reach = np.empty(LANES), np.empty(LANES), np.empty(LANES), np.empty(LANES)
+        g_a = np.empty(LANES)
+        for row in range(part * rows // parts, (part + 1) * rows // parts):
+            b, y = row // height, row % height
+            for start in range(0, width, LANES):
+                count = min(LANES, width - start)
+                needed = _samples_needed(sigma, b, y, start, count, steps, step_length, support)
+                g_a[:] = 0.0
+                for sign in (1.0, -1.0):
+                    for i in range(count):
+                        x = start + i
+                        px[i], py[i] = x, y
+                        hx[i], hy[i] = sign * tangent[b, 0, y, x], sign * tangent[b, 1, y, x]
+                        weight[i], growth[i], ratio_step[i] = _weight_recurrence(coefficient[b, 0, y, x], step_length)
+                        reach[i] = support * sigma[b, 0, y, x]
+                    for k in range(needed):
+                        distance = (k + 1) * step_length
+                        for i in range(count):
+                            x = start + i
+                            px[i], py[i], x0, x1, fx, y0, y1, fy, hx_next, hy_next = _step(
+                                image, tangent, b, px[i], py[i], hx[i], hy[i], step_length, width, height
+                            )
+                            hx[i], hy[i] = hx_next, hy_next
+                            if k == 0 or distance <= reach[i]:
+                                g_weight = grad_norm[b, 0, y, x]
+                                for c in range(channels):
+                                    g = grad_total[b, c, y, x]
+                                    g_weight += g * interpolate(image, b, c, y0, y1, x0, x1, fy, fx)
+                                    scatter(g_image, b, c, y0, y1, x0, x1, fy, fx, g * weight[i])
+                                g_a[i] += g_weight * weight[i] * distance * distance
+                            weight[i] *= growth[i]
+                            growth[i] *= ratio_step[i]
+                for i in range(count):
+                    g_coefficient[b, 0, y, start + i] = g_a[i]
+
+
+class FlowSmoothingTaps(torch.autograd.Function):
+    """``sum_k w_k v_k`` and ``sum_k w_k`` over the samples of :func:`wise.filters.dog.flow_smoothing`
+    on both streamlines of every pixel, ``w_k = exp(d_k^2 a)`` cut off beyond ``support * sigma``
+    (the nearest samples always count). Gradients reach the image and ``a``."""
+
+    @staticmethod
+    def forward(ctx, image, tangent, sigma, coefficient, steps: int, step_length: float, support: float):  # type: ignore[override]
+        b, c, h, w = image.shape
+        pixels = np.ascontiguousarray(image.detach().numpy())
+        total = np.empty_like(pixels)
+        norm = np.empty((b, 1, h, w), dtype=pixels.dtype)
+        maps = [full(v.to(image.dtype), (b, 1, h, w)) for v in (sigma, coefficient)]
+        with kernel_threads():
+            _smoothing_forward(
+                pixels, full(tangent.to(image.dtype), (b, 2, h, w)), *maps, steps, step_length, support, total, norm
+            )
+        ctx.save_for_backward(image, tangent, sigma, coefficient)
+        ctx.settings = (steps, step_length, support)
+        return torch.from_numpy(total), torch.from_numpy(norm)
+
+    @staticmethod
+    def backward(ctx, grad_total, grad_norm):  # type: ignore[override]
+        image, tangent, sigma, coefficient = ctx.saved_tensors
+        b, c, h, w = image.shape
+        pixels = np.ascontiguousarray(image.detach().numpy())
+        need_image = ctx.needs_input_grad[0]
+        g_image_parts = np.empty((chunks(), b, c, h, w), dtype=pixels.dtype)
+        g_coefficient = np.empty((b, 1, h, w), dtype=pixels.dtype)
+        with kernel_threads():
+            _smoothing_backward(
+                pixels,
+                full(tangent.to(image.dtype), (b, 2, h, w)),
+                *[full(v.to(image.dtype), (b, 1, h, w)) for v in (sigma, coefficient)],
+                *ctx.settings,
+                full(grad_total, (b, c, h, w)),
+                full(grad_norm, (b, 1, h, w)),
+                g_image_parts,
+                g_coefficient,
+            )
+        return (
+            torch.from_numpy(g_image_parts).sum(dim=0) if need_image else None,
+            None,
+            None,
+            reduce_to(torch.from_numpy(g_coefficient), coefficient.shape) if ctx.needs_input_grad[3] else None,
+            None,
+            None,
+            None,
+        )
