@@ -6,9 +6,9 @@ import pytest
 import torch
 from torch.autograd import gradcheck
 
-from tests.filters.helpers import rand, unit_field
+from tests.filters.helpers import rand, unit, unit_field
 from tests.filters.paths import assert_paths_agree, kernels
-from wise.filters.dog import flow_smoothing
+from wise.filters.dog import flow_dog, flow_smoothing
 
 
 def smooth_field(b: int, h: int, w: int, dtype=torch.float64) -> torch.Tensor:
@@ -62,3 +62,36 @@ def test_the_fused_smoothing_runs_only_when_asked(monkeypatch: pytest.MonkeyPatc
         with kernels(path):
             flow_smoothing(image, tangent, 2.0, scale=1.0)
     assert calls == [1] and math.isfinite(1.0)
+
+
+@pytest.mark.parametrize("per_pixel", [False, True])
+def test_flow_dog_matches_torch_in_float64(per_pixel: bool) -> None:
+    image = rand(2, 1, 14, 17)
+    tangent = unit_field(2, 14, 17, seed=4)
+    sigma = rand(2, 1, 14, 17, low=0.4, high=1.5, seed=5) if per_pixel else rand(2, low=0.5, high=1.2, seed=5)
+    sharpen = rand(2, 1, 14, 17, low=10.0, high=100.0, seed=6) if per_pixel else 50.0
+    inputs = [image, tangent, sigma] + ([sharpen] if per_pixel else [])
+
+    def fn(image, tangent, sigma, *rest):
+        return flow_dog(image, unit(tangent), sigma, rest[0] if rest else sharpen, max_steps=6, scale=1.0)
+
+    assert_paths_agree(fn, inputs, rtol=1e-9)
+
+
+def test_flow_dog_matches_torch_in_float32() -> None:
+    image = rand(3, 1, 40, 36).detach().float().requires_grad_()
+    tangent = unit_field(3, 40, 36).detach().float().requires_grad_()
+    assert_paths_agree(lambda i, t: flow_dog(i, t, 1.0, 100.0, scale=1.0), [image, tangent], rtol=2e-5)
+
+
+def test_flow_dog_gradcheck() -> None:
+    image = rand(2, 2, 6, 7)
+    tangent = unit_field(2, 6, 7, seed=2)
+    sigma = rand(2, 1, 6, 7, low=0.6, high=0.9, seed=3)
+    with kernels("fused"):
+        assert gradcheck(
+            lambda i, t, s: flow_dog(i, unit(t), s, 20.0, max_steps=3, scale=1.0),
+            (image, tangent, sigma),
+            eps=1e-6,
+            atol=1e-5,
+        )

@@ -6,6 +6,7 @@ import math
 
 import torch
 
+from wise.filters import fused
 from wise.filters._checks import ParamLike, as_map, check_image, max_value, resolution_scale
 from wise.filters.flow import check_direction, pixel_step
 from wise.filters.gaussian import MIN_SIGMA, SUPPORT, in_support
@@ -58,6 +59,12 @@ class _BilateralTaps(torch.autograd.Function):
 
     @staticmethod
     def backward(ctx, grad_total, grad_norm):  # type: ignore[override]
+        if fused.enabled(*ctx.saved_tensors, grad_total):
+            from wise.filters.fused.bilateral import bilateral_taps_backward
+
+            return bilateral_taps_backward(
+                ctx.saved_tensors, ctx.n, SUPPORT, grad_total, grad_norm, ctx.needs_input_grad
+            )
         image, direction, step, spatial, neg_a, neg_r = ctx.saved_tensors
         full = torch.broadcast_shapes(step.shape, neg_a.shape, neg_r.shape)
         g_image = torch.zeros_like(image)

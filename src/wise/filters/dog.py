@@ -135,9 +135,13 @@ def flow_dog(
     neg_inv_two_wide_sq = -0.5 / wide.square()
 
     direction = direction.expand(image.shape[0], -1, -1, -1)
-    sum_narrow, norm_narrow, sum_wide, norm_wide = _DogTaps.apply(
-        image, direction, step, wide, neg_inv_two_narrow_sq, neg_inv_two_wide_sq, steps
-    )
+    if fused.enabled(image, direction, step, wide):
+        from wise.filters.fused.dog import DogTaps
+
+        taps = DogTaps.apply(image, direction, step, wide, neg_inv_two_narrow_sq, neg_inv_two_wide_sq, steps, SUPPORT)
+    else:
+        taps = _DogTaps.apply(image, direction, step, wide, neg_inv_two_narrow_sq, neg_inv_two_wide_sq, steps)
+    sum_narrow, norm_narrow, sum_wide, norm_wide = taps
     blur_narrow = (image + sum_narrow) / (1.0 + norm_narrow)
     blur_wide = (image + sum_wide) / (1.0 + norm_wide)
     p = as_map(sharpen, image, "sharpen")

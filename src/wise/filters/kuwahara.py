@@ -10,6 +10,7 @@ import torch
 import torch.nn.functional as F
 
 from wise.errors import WiseError
+from wise.filters import fused
 from wise.filters._checks import ParamLike, as_map, check_image, resolution_scale
 from wise.filters.sampling import offset_grid, sample_at_grid
 from wise.filters.structure import edge_tangent_flow, gradient_direction
@@ -218,6 +219,10 @@ def anisotropic_kuwahara(
     taps = _sample_layout(sectors, samples_per_sector)
     sums, square_sums = _SectorSums.apply(image, centre, major, minor, taps, sectors)
     total_weight = samples_per_sector + CENTRE_WEIGHT
+    if fused.enabled(image, sums, q):
+        from wise.filters.fused.kuwahara import SectorBlend
+
+        return SectorBlend.apply(image, sums, square_sums, q, float(total_weight), VARIANCE_SCALE, _VARIANCE_EPS)
     mean_offsets = sums / total_weight
     variances = square_sums / total_weight - (mean_offsets * mean_offsets).sum(dim=2, keepdim=True)
     weights = _sector_weights(variances, q)

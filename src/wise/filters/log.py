@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import torch
 
+from wise.filters import fused
 from wise.filters._checks import ParamLike, max_value
 from wise.filters.flow import flow_filter_inputs, pixel_step, spaced_samples
 from wise.filters.sampling import sample, tap_sum
@@ -78,9 +79,13 @@ def flow_log(
     direction = gradient_direction(tangent).expand(image.shape[0], -1, -1, -1)
     step = pixel_step(direction) * spacing
 
-    second_v, gauss_v, second, gauss, second_u2, gauss_u2 = tap_sum(
-        _log_tap, steps, image, direction, step, 1.0 / sigma_px
-    )
+    if fused.enabled(image, direction, step, sigma_px):
+        from wise.filters.fused.log import LogTaps
+
+        sums = LogTaps.apply(image, direction, step, 1.0 / sigma_px, steps, EXTENT)
+    else:
+        sums = tap_sum(_log_tap, steps, image, direction, step, 1.0 / sigma_px)
+    second_v, gauss_v, second, gauss, second_u2, gauss_u2 = sums
     # the centre sample: u = 0, g = 1, g'' = -1
     second_v = second_v - image
     gauss_v = gauss_v + image

@@ -5,6 +5,7 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
+from wise.filters import fused
 from wise.filters._checks import ParamLike, as_map, check_image, resolution_scale
 from wise.filters.gaussian import gaussian_blur
 from wise.filters.sampling import sample, tap_sum
@@ -50,6 +51,15 @@ def structure_tensor(image: torch.Tensor, sigma: ParamLike = 1.0, scale: float |
     distance = (as_map(sigma, image, "sigma") * s).clamp_min(1e-3)
     b, _, h, w = image.shape
     distance = distance.expand(b, 1, h, w)
+
+    if fused.enabled(image, distance):
+        from wise.filters.fused.structure import SobelTaps
+
+        stencil = torch.tensor(
+            [(dx, dy, wx / _SOBEL_NORM, wy / _SOBEL_NORM) for dx, dy, wx, wy in _SOBEL_TAPS], dtype=image.dtype
+        )
+        fx, fy = SobelTaps.apply(image, distance, stencil)
+        return _tensor_components(fx / distance, fy / distance)
 
     def tap(k: int, image: torch.Tensor, distance: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         dx, dy, wx, wy = _SOBEL_TAPS[k]

@@ -1,4 +1,9 @@
-"""Fused CPU kernels of :mod:`wise.filters.dog`: the line-integral smoothing along the flow.
+"""Fused CPU kernels of :mod:`wise.filters.dog`: the line-integral smoothing along the flow and
+the difference of Gaussians across it.
+
+:class:`DogTaps` sums the samples across the flow for the narrow and the wide Gaussian of
+:func:`wise.filters.dog.flow_dog` (Winnemöller et al. 2012) in one pass over the pixels, with
+the analytic backward of :class:`wise.filters.dog._DogTaps`.
 
 :func:`wise.filters.dog.flow_smoothing` sums Gaussian-weighted bilinear samples along each
 pixel's streamline (line integral convolution, Cabral & Leedom 1993): Euler steps of
@@ -19,7 +24,7 @@ import torch
 from numba import njit, prange
 
 from wise.filters.fused import FASTMATH, chunks, full, kernel_threads, reduce_to
-from wise.filters.fused.bilinear import interpolate, locate, scatter
+from wise.filters.fused.bilinear import interpolate, locate, scatter, slopes
 
 _MIN_TANGENT_LENGTH = 1e-6
 
@@ -192,6 +197,177 @@ class FlowSmoothingTaps(torch.autograd.Function):
             None,
             reduce_to(torch.from_numpy(g_coefficient), coefficient.shape) if ctx.needs_input_grad[3] else None,
             None,
+            None,
+            None,
+        )
+
+
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
+def _dog_forward(image, direction, step, wide, narrow_coefficient, wide_coefficient, steps, support, sums, norms):
+    batch, channels, height, width = image.shape
+    for row in prange(batch * height):
+        b, y = row // height, row % height
+        for x in range(width):
+            for c in range(channels):
+                sums[0, b, c, y, x] = 0.0
+                sums[1, b, c, y, x] = 0.0
+            norm_narrow = norm_wide = 0.0
+            ux, uy = direction[b, 0, y, x], direction[b, 1, y, x]
+            a_narrow, a_wide = narrow_coefficient[b, 0, y, x], wide_coefficient[b, 0, y, x]
+            reach = support * wide[b, 0, y, x]
+            for i in range(1, steps + 1):
+                distance = i * step[b, 0, y, x]
+                if i > 1 and distance > reach:
+                    break
+                w_narrow = math.exp(distance * distance * a_narrow)
+                w_wide = math.exp(distance * distance * a_wide)
+                xa0, xa1, fxa, _ = locate(x + distance * ux, width)
+                ya0, ya1, fya, _ = locate(y + distance * uy, height)
+                xb0, xb1, fxb, _ = locate(x - distance * ux, width)
+                yb0, yb1, fyb, _ = locate(y - distance * uy, height)
+                for c in range(channels):
+                    both = interpolate(image, b, c, ya0, ya1, xa0, xa1, fya, fxa) + interpolate(
+                        image, b, c, yb0, yb1, xb0, xb1, fyb, fxb
+                    )
+                    sums[0, b, c, y, x] += w_narrow * both
+                    sums[1, b, c, y, x] += w_wide * both
+                norm_narrow += 2.0 * w_narrow
+                norm_wide += 2.0 * w_wide
+            norms[0, b, 0, y, x] = norm_narrow
+            norms[1, b, 0, y, x] = norm_wide
+
+
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
+def _dog_backward(
+    image,
+    direction,
+    step,
+    wide,
+    narrow_coefficient,
+    wide_coefficient,
+    steps,
+    support,
+    grad_sums,
+    grad_norms,
+    need_image,
+    g_image_parts,
+    g_maps,
+):
+    batch, channels, height, width = image.shape
+    parts = g_image_parts.shape[0]
+    rows = batch * height
+    for part in prange(parts):
+        g_image = g_image_parts[part]
+        g_image[:] = 0.0
+        for row in range(part * rows // parts, (part + 1) * rows // parts):
+            b, y = row // height, row % height
+            for x in range(width):
+                ux, uy = direction[b, 0, y, x], direction[b, 1, y, x]
+                a_narrow, a_wide = narrow_coefficient[b, 0, y, x], wide_coefficient[b, 0, y, x]
+                reach = support * wide[b, 0, y, x]
+                g_norm_narrow, g_norm_wide = grad_norms[0, b, 0, y, x], grad_norms[1, b, 0, y, x]
+                g_ux = g_uy = g_step = g_a_narrow = g_a_wide = 0.0
+                for i in range(1, steps + 1):
+                    distance = i * step[b, 0, y, x]
+                    if i > 1 and distance > reach:
+                        break
+                    w_narrow = math.exp(distance * distance * a_narrow)
+                    w_wide = math.exp(distance * distance * a_wide)
+                    xa0, xa1, fxa, clamp_xa = locate(x + distance * ux, width)
+                    ya0, ya1, fya, clamp_ya = locate(y + distance * uy, height)
+                    xb0, xb1, fxb, clamp_xb = locate(x - distance * ux, width)
+                    yb0, yb1, fyb, clamp_yb = locate(y - distance * uy, height)
+                    g_w_narrow = 2.0 * g_norm_narrow
+                    g_w_wide = 2.0 * g_norm_wide
+                    g_offset_x = g_offset_y = 0.0
+                    for c in range(channels):
+                        g_narrow, g_wide = grad_sums[0, b, c, y, x], grad_sums[1, b, c, y, x]
+                        both = interpolate(image, b, c, ya0, ya1, xa0, xa1, fya, fxa) + interpolate(
+                            image, b, c, yb0, yb1, xb0, xb1, fyb, fxb
+                        )
+                        g_w_narrow += g_narrow * both
+                        g_w_wide += g_wide * both
+                        g_value = g_narrow * w_narrow + g_wide * w_wide
+                        if need_image:
+                            scatter(g_image, b, c, ya0, ya1, xa0, xa1, fya, fxa, g_value)
+                            scatter(g_image, b, c, yb0, yb1, xb0, xb1, fyb, fxb, g_value)
+                        slope_x, slope_y = slopes(image, b, c, ya0, ya1, xa0, xa1, fya, fxa)
+                        g_offset_x += g_value * slope_x * clamp_xa
+                        g_offset_y += g_value * slope_y * clamp_ya
+                        slope_x, slope_y = slopes(image, b, c, yb0, yb1, xb0, xb1, fyb, fxb)
+                        g_offset_x -= g_value * slope_x * clamp_xb
+                        g_offset_y -= g_value * slope_y * clamp_yb
+                    g_log_narrow, g_log_wide = g_w_narrow * w_narrow, g_w_wide * w_wide
+                    g_a_narrow += g_log_narrow * distance * distance
+                    g_a_wide += g_log_wide * distance * distance
+                    g_ux += g_offset_x * distance
+                    g_uy += g_offset_y * distance
+                    g_distance = (
+                        g_offset_x * ux
+                        + g_offset_y * uy
+                        + 2.0 * distance * (g_log_narrow * a_narrow + g_log_wide * a_wide)
+                    )
+                    g_step += g_distance * i
+                g_maps[0, b, 0, y, x] = g_ux
+                g_maps[1, b, 0, y, x] = g_uy
+                g_maps[2, b, 0, y, x] = g_step
+                g_maps[3, b, 0, y, x] = g_a_narrow
+                g_maps[4, b, 0, y, x] = g_a_wide
+
+
+class DogTaps(torch.autograd.Function):
+    """The fused :class:`wise.filters.dog._DogTaps`: ``sum w_n v``, ``sum w_n``, ``sum w_w v`` and
+    ``sum w_w`` over the samples across the flow, for the narrow and the wide Gaussian."""
+
+    @staticmethod
+    def forward(
+        ctx, image, direction, step, wide, neg_inv_two_narrow_sq, neg_inv_two_wide_sq, steps: int, support: float
+    ):  # type: ignore[override]
+        b, c, h, w = image.shape
+        pixels = np.ascontiguousarray(image.detach().numpy())
+        sums = np.empty((2, b, c, h, w), dtype=pixels.dtype)
+        norms = np.empty((2, b, 1, h, w), dtype=pixels.dtype)
+        maps = [full(v.to(image.dtype), (b, 1, h, w)) for v in (step, wide, neg_inv_two_narrow_sq, neg_inv_two_wide_sq)]
+        with kernel_threads():
+            _dog_forward(pixels, full(direction, (b, 2, h, w)), *maps, steps, support, sums, norms)
+        ctx.save_for_backward(image, direction, step, wide, neg_inv_two_narrow_sq, neg_inv_two_wide_sq)
+        ctx.steps, ctx.support = steps, support
+        sums_t, norms_t = torch.from_numpy(sums), torch.from_numpy(norms)
+        return sums_t[0], norms_t[0], sums_t[1], norms_t[1]
+
+    @staticmethod
+    def backward(ctx, g_sum_narrow, g_norm_narrow, g_sum_wide, g_norm_wide):  # type: ignore[override]
+        image, direction, step, wide, neg_narrow, neg_wide = ctx.saved_tensors
+        b, c, h, w = image.shape
+        pixels = np.ascontiguousarray(image.detach().numpy())
+        need_image = ctx.needs_input_grad[0]
+        g_image_parts = np.empty((chunks(), *((b, c, h, w) if need_image else (1, 1, 1, 1))), dtype=pixels.dtype)
+        g_maps = np.empty((5, b, 1, h, w), dtype=pixels.dtype)
+        grad_sums = torch.stack((g_sum_narrow.expand(b, c, h, w), g_sum_wide.expand(b, c, h, w))).contiguous()
+        grad_norms = torch.stack((g_norm_narrow.expand(b, 1, h, w), g_norm_wide.expand(b, 1, h, w))).contiguous()
+        maps = [full(v.to(image.dtype), (b, 1, h, w)) for v in (step, wide, neg_narrow, neg_wide)]
+        with kernel_threads():
+            _dog_backward(
+                pixels,
+                full(direction, (b, 2, h, w)),
+                *maps,
+                ctx.steps,
+                ctx.support,
+                grad_sums.numpy(),
+                grad_norms.numpy(),
+                need_image,
+                g_image_parts,
+                g_maps,
+            )
+        grads = torch.from_numpy(g_maps)
+        wanted = ctx.needs_input_grad
+        return (
+            torch.from_numpy(g_image_parts).sum(dim=0) if need_image else None,
+            reduce_to(grads[:2].squeeze(2).transpose(0, 1), direction.shape) if wanted[1] else None,
+            reduce_to(grads[2], step.shape) if wanted[2] else None,
+            None,
+            reduce_to(grads[3], neg_narrow.shape) if wanted[4] else None,
+            reduce_to(grads[4], neg_wide.shape) if wanted[5] else None,
             None,
             None,
         )
