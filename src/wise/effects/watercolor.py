@@ -93,6 +93,7 @@ class Watercolor(Effect):
     """
 
     name = "watercolor"
+    tile_pixels = 6_000_000  # its washes and textures keep many images per pixel: within 4 GB at 4096²
     position_dependent = True
     param_specs = (
         ParamSpec("brightness", -0.2, 0.3, 0.05, "added to the input colours"),
