@@ -65,11 +65,21 @@ def enabled(*tensors: torch.Tensor) -> bool:
     return all(t.device.type == "cpu" and t.dtype == dtype for t in tensors) and dtype in _DTYPES
 
 
+def _numba():
+    """Numba, on its own work-sharing thread pool unless ``NUMBA_THREADING_LAYER`` chooses another:
+    an OpenMP pool does not survive the fork of a DataLoader worker (GNU OpenMP is not fork-safe),
+    and the lock around the kernels makes up for the pool not being thread-safe."""
+    import numba
+
+    if "NUMBA_THREADING_LAYER" not in os.environ:
+        numba.config.THREADING_LAYER = "workqueue"
+    return numba
+
+
 @contextmanager
 def kernel_threads() -> Iterator[None]:
     """Run a kernel with PyTorch's thread count, one kernel at a time in the process."""
-    import numba
-
+    numba = _numba()
     with _lock:
         numba.set_num_threads(max(1, min(torch.get_num_threads(), numba.config.NUMBA_NUM_THREADS)))
         yield
@@ -77,7 +87,7 @@ def kernel_threads() -> Iterator[None]:
 
 def chunks() -> int:
     """Number of private accumulators of a backward pass that scatters: one per thread."""
-    import numba
+    numba = _numba()
 
     return max(1, min(torch.get_num_threads(), numba.config.NUMBA_NUM_THREADS))
 
