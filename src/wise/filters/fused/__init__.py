@@ -81,8 +81,12 @@ def kernel_threads() -> Iterator[None]:
     """Run a kernel with PyTorch's thread count, one kernel at a time in the process."""
     numba = _numba()
     with _lock:
-        numba.set_num_threads(max(1, min(torch.get_num_threads(), numba.config.NUMBA_NUM_THREADS)))
-        yield
+        torch_threads = torch.get_num_threads()
+        numba.set_num_threads(max(1, min(torch_threads, numba.config.NUMBA_NUM_THREADS)))
+        try:
+            yield
+        finally:  # an OpenMP pool shared with PyTorch (NUMBA_THREADING_LAYER=omp) would change its count
+            torch.set_num_threads(torch_threads)
 
 
 def chunks() -> int:
