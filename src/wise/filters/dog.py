@@ -128,13 +128,12 @@ def flow_dog(
     s, narrow = flow_filter_inputs(image, tangent, sigma, scale)
     wide = narrow * WIDE_TO_NARROW
     spacing, steps = spaced_samples(SUPPORT * max_value(wide), max_steps)
-    direction = gradient_direction(tangent)
+    direction = gradient_direction(tangent).expand(image.shape[0], -1, -1, -1)  # one flow may serve a batch
     step = pixel_step(direction) * spacing
 
     neg_inv_two_narrow_sq = -0.5 / narrow.square()
     neg_inv_two_wide_sq = -0.5 / wide.square()
 
-    direction = direction.expand(image.shape[0], -1, -1, -1)
     if fused.enabled(image, direction, step, wide):
         from wise.filters.fused.dog import DogTaps
 
