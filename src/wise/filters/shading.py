@@ -7,6 +7,7 @@ import math
 import torch
 
 from wise.errors import WiseError
+from wise.filters import fused
 from wise.filters._checks import ParamLike, as_map, check_image, resolution_scale
 
 DEFAULT_LIGHT_DIRECTION = (-1.0, -1.0, 1.0)
@@ -90,14 +91,23 @@ def bump_phong(
         raise WiseError(f"height {tuple(height.shape)} must be a (B, 1, H, W) map matching color {tuple(color.shape)}")
     light_x, light_y, light_z = _unit_light(light_direction)
     pixels_per_reference = resolution_scale(color) if scale is None else scale
-    dh_dx, dh_dy = height_gradient(height, pixels_per_reference)
     strength_map = as_map(strength, color, "strength")
+    maps = [as_map(v, color, name) for v, name in ((ambient, "ambient"), (diffuse, "diffuse"), (specular, "specular"))]
+    shininess_map = as_map(shininess, color, "shininess")
+    if fused.enabled(color, height, strength_map, shininess_map, *maps):
+        from wise.filters.fused.shading import BumpPhong
+
+        light = (light_x, light_y, light_z)
+        half_scale = 0.5 * pixels_per_reference
+        return BumpPhong.apply(color, height, strength_map, *maps, shininess_map, light, half_scale, POW_FLOOR)
+    ambient_map, diffuse_map, specular_map = maps
+    dh_dx, dh_dy = height_gradient(height, pixels_per_reference)
     normal_x = -strength_map * dh_dx
     normal_y = -strength_map * dh_dy
     normal_z = torch.rsqrt(normal_x * normal_x + normal_y * normal_y + 1.0)  # also 1/|(nx, ny, 1)|
     n_dot_l = (normal_x * light_x + normal_y * light_y + light_z) * normal_z
     r_dot_v = 2.0 * n_dot_l * normal_z - light_z
-    lighting = as_map(ambient, color, "ambient") + as_map(diffuse, color, "diffuse") * n_dot_l.clamp_min(0.0)
-    highlight = r_dot_v.clamp_min(POW_FLOOR) ** as_map(shininess, color, "shininess")
-    shaded = torch.addcmul(as_map(specular, color, "specular") * highlight, color, lighting)
+    lighting = ambient_map + diffuse_map * n_dot_l.clamp_min(0.0)
+    highlight = r_dot_v.clamp_min(POW_FLOOR) ** shininess_map
+    shaded = torch.addcmul(specular_map * highlight, color, lighting)
     return shaded.clamp(0.0, 1.0)

@@ -8,6 +8,7 @@ import torch
 import torch.nn.functional as F
 
 from wise.errors import WiseError
+from wise.filters import fused
 from wise.filters._checks import ParamLike, as_map, check_image
 from wise.filters.gaussian import MIN_SIGMA
 from wise.filters.sampling import tap_sum
@@ -184,9 +185,17 @@ def joint_bilateral_upsample(
 
     neg_s = -0.5 / as_map(sigma_spatial, guide, "sigma_spatial").clamp_min(MIN_SIGMA_SPATIAL).square()
     neg_r = -0.5 / as_map(sigma_range, guide, "sigma_range").clamp_min(MIN_SIGMA).square()
-    packed = torch.cat((low, F.adaptive_avg_pool2d(guide, (h, w))), dim=1)
+    guide_low = F.adaptive_avg_pool2d(guide, (h, w))
     rows, rows_sq = _axis_neighbours(height, h, radius, guide)
     cols, cols_sq = _axis_neighbours(width, w, radius, guide)
+    if fused.enabled(low, guide, neg_s, neg_r):
+        from wise.filters.fused.upsample import JointBilateralSum
+
+        geometry = (rows, rows_sq, cols, cols_sq)
+        return JointBilateralSum.apply(
+            low, guide_low, guide, neg_s, neg_r, *geometry, RANGE_EXPONENT_FLOOR, EXPONENT_FLOOR
+        )
+    packed = torch.cat((low, guide_low), dim=1)
     channels = low.shape[1]
 
     inputs = (packed, guide, neg_s, neg_r)

@@ -14,6 +14,7 @@ import torch
 import torch.nn.functional as F
 
 from wise.errors import WiseError
+from wise.filters import fused
 from wise.filters._checks import ParamLike, as_map, check_image, resolution_scale
 from wise.filters.flow import check_direction
 from wise.filters.gaussian import SUPPORT, gaussian_blur
@@ -225,6 +226,11 @@ def gaps_overlaps(
     band = as_map(edges, image, "edges") * as_map(noise, image, "noise")
     a = as_map(amount, image, "amount")
     gap, overlap = torch.relu(-a), torch.relu(a)
+    if fused.enabled(image, direction, band, a):
+        from wise.filters.fused.watercolor import GapsOverlaps
+
+        across = direction.expand(image.shape[0], -1, -1, -1)
+        return GapsOverlaps.apply(image, across, band, gap, overlap, width * s, PAPER_WHITE, _SELECTION_EPS)
     other = _other_side(image, direction.expand(image.shape[0], -1, -1, -1), width * s)
     change = gap * (PAPER_WHITE - image) + overlap * (image * other - image)
     return image + band * change
@@ -275,6 +281,11 @@ def wet_in_wet(
     spacing = as_map(amount, image, "amount") * (s / samples) * feathering
     step = (direction * spacing).expand(image.shape[0], -1, -1, -1)
     weights = _wet_weights(samples)
+    blend = as_map(edges, image, "edges")
+    if fused.enabled(image, step, blend):
+        from wise.filters.fused.watercolor import WetInWet
+
+        return WetInWet.apply(image, step, blend, weights)
 
     def tap(k: int, image: torch.Tensor, step: torch.Tensor) -> tuple[torch.Tensor]:
         j = k + 1
@@ -283,7 +294,7 @@ def wet_in_wet(
 
     (total,) = tap_sum(tap, samples, image, step)
     bled = (image * weights[0] + total) / (weights[0] + 2.0 * sum(weights[1:]))
-    return image + as_map(edges, image, "edges") * (bled - image)
+    return image + blend * (bled - image)
 
 
 def flat_washes(

@@ -50,3 +50,17 @@ def scatter(image, b: int, c: int, y0: int, y1: int, x0: int, x1: int, fy: float
     image[b, c, y0, x1] += top * fx
     image[b, c, y1, x0] += bottom * (1.0 - fx)
     image[b, c, y1, x1] += bottom * fx
+
+
+@njit(inline="always")
+def interpolate_with_slopes(
+    image, b: int, c: int, y0: int, y1: int, x0: int, x1: int, fy: float, fx: float
+) -> tuple[float, float, float]:
+    """:func:`interpolate` and :func:`slopes` together, reading the four corners once."""
+    top_left, top_right = image[b, c, y0, x0], image[b, c, y0, x1]
+    bottom_left, bottom_right = image[b, c, y1, x0], image[b, c, y1, x1]
+    top_slope = top_right - top_left
+    bottom_slope = bottom_right - bottom_left
+    top = top_left + fx * top_slope
+    bottom = bottom_left + fx * bottom_slope
+    return top + fy * (bottom - top), top_slope + fy * (bottom_slope - top_slope), bottom - top
