@@ -23,6 +23,13 @@ def test_flow_log_matches_torch_in_float32() -> None:
     assert_paths_agree(lambda i, t: flow_log(i, t, 1.5, scale=1.0), [image, tangent], rtol=2e-5)
 
 
+def test_flow_log_gradient_of_the_tangent_alone() -> None:
+    image = rand(2, 1, 12, 13).detach()
+    tangent = unit_field(1, 12, 13, seed=7)
+    sigma = rand(2, 1, 12, 13, low=0.6, high=2.0, seed=8).detach()
+    assert_paths_agree(lambda i, t: flow_log(i, unit(t), sigma, scale=1.0), [image, tangent], rtol=1e-9)
+
+
 def test_flow_log_gradcheck() -> None:
     image = rand(2, 1, 6, 7)
     tangent = unit_field(2, 6, 7, seed=3)

@@ -32,8 +32,8 @@ def test_the_fused_sobel_runs_only_when_asked(monkeypatch: pytest.MonkeyPatch) -
     from wise.filters.fused import structure as fused_structure
 
     calls = []
-    original = fused_structure._sobel_forward
-    monkeypatch.setattr(fused_structure, "_sobel_forward", lambda *a: calls.append(1) or original(*a))
+    original = fused_structure._tensor_forward
+    monkeypatch.setattr(fused_structure, "_tensor_forward", lambda *a: calls.append(1) or original(*a))
     for path in ("fused", "torch"):
         with kernels(path):
             structure_tensor(torch.rand(1, 1, 8, 8), 0.6, scale=1.0)

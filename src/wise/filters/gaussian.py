@@ -110,6 +110,10 @@ def _blur_by_pyramid(image: torch.Tensor, pixels: float) -> torch.Tensor:
 
 def _blur_axis_varying(image: torch.Tensor, sigma: torch.Tensor, axis: int) -> torch.Tensor:
     radius = _kernel_radius(max_value(sigma))
+    if fused.enabled(image, sigma):
+        from wise.filters.fused.gaussian import VaryingBlurAxis
+
+        return VaryingBlurAxis.apply(image, sigma, axis, radius, SUPPORT)
     size = image.shape[axis]
     pad = (radius, radius, 0, 0) if axis == 3 else (0, 0, radius, radius)
     padded = F.pad(image, pad, mode="replicate")

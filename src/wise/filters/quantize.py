@@ -13,6 +13,7 @@ import math
 import torch
 
 from wise.errors import WiseError
+from wise.filters import fused
 from wise.filters._checks import ParamLike, as_map, check_image
 from wise.filters.smoothing import step_temperature
 
@@ -95,16 +96,23 @@ def _best_bins(
     x, y, grad, sample_bins, softness = (
         _subsample(t, stride) if t is not None else None for t in (x, y, grad, bins, softness)
     )
-    grad_sign = grad.sign().reshape(batch, -1, 1)
+    if fused.enabled(x, y, grad, sample_bins, *([] if softness is None else [softness])):
+        from wise.filters.fused.quantize import candidate_scores
 
-    def score(step: float | None) -> torch.Tensor:
-        if step is None:
-            return grad.new_zeros(batch)  # y itself
-        levels = _levels(x, _candidate(sample_bins, step), softness)
-        moves = torch.sub(y, levels, out=levels).sign_()
-        return torch.bmm(moves.reshape(batch, 1, -1), grad_sign).view(batch)  # per-image dot product
+        offsets = [step for step in steps if step is not None]
+        by_offset = iter(candidate_scores(x, y, grad, sample_bins, softness, offsets, MIN_BINS))
+        scores = torch.stack([grad.new_zeros(batch) if step is None else next(by_offset) for step in steps])
+    else:
+        grad_sign = grad.sign().reshape(batch, -1, 1)
 
-    scores = torch.stack([score(k) for k in steps])
+        def score(step: float | None) -> torch.Tensor:
+            if step is None:
+                return grad.new_zeros(batch)  # y itself
+            levels = _levels(x, _candidate(sample_bins, step), softness)
+            moves = torch.sub(y, levels, out=levels).sign_()
+            return torch.bmm(moves.reshape(batch, 1, -1), grad_sign).view(batch)  # per-image dot product
+
+        scores = torch.stack([score(k) for k in steps])
     if bins.shape[0] == 1:
         scores = scores.sum(dim=1, keepdim=True)  # one bin count shared by the whole batch
     best = scores.argmax(dim=0).tolist()

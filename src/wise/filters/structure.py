@@ -53,13 +53,9 @@ def structure_tensor(image: torch.Tensor, sigma: ParamLike = 1.0, scale: float |
     distance = distance.expand(b, 1, h, w)
 
     if fused.enabled(image, distance):
-        from wise.filters.fused.structure import SobelTaps
+        from wise.filters.fused.structure import StructureTensor
 
-        stencil = torch.tensor(
-            [(dx, dy, wx / _SOBEL_NORM, wy / _SOBEL_NORM) for dx, dy, wx, wy in _SOBEL_TAPS], dtype=image.dtype
-        )
-        fx, fy = SobelTaps.apply(image, distance, stencil)
-        return _tensor_components(fx / distance, fy / distance)
+        return StructureTensor.apply(image, distance, _fused_weights(image.dtype))
 
     def tap(k: int, image: torch.Tensor, distance: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         dx, dy, wx, wy = _SOBEL_TAPS[k]
@@ -71,6 +67,14 @@ def structure_tensor(image: torch.Tensor, sigma: ParamLike = 1.0, scale: float |
     fx = fx / distance
     fy = fy / distance
     return _tensor_components(fx, fy)
+
+
+def _fused_weights(dtype: torch.dtype) -> torch.Tensor:
+    """The Sobel weights of d/dx and d/dy as the fused kernel reads them: ``(2, 3, 3)`` by ``(dy + 1, dx + 1)``."""
+    weights = torch.zeros(2, 3, 3, dtype=dtype)
+    for dx, dy, weight_x, weight_y in _SOBEL_TAPS:
+        weights[:, dy + 1, dx + 1] = torch.tensor((weight_x, weight_y), dtype=dtype) / _SOBEL_NORM
+    return weights
 
 
 def _tensor_components(fx: torch.Tensor, fy: torch.Tensor) -> torch.Tensor:

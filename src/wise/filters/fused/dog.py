@@ -24,7 +24,7 @@ import torch
 from numba import njit, prange
 
 from wise.filters.fused import FASTMATH, chunks, full, kernel_threads, reduce_to
-from wise.filters.fused.bilinear import interpolate, locate, scatter, slopes
+from wise.filters.fused.bilinear import interpolate, interpolate_with_slopes, locate, scatter
 
 _MIN_TANGENT_LENGTH = 1e-6
 
@@ -63,7 +63,11 @@ def _samples_needed(sigma, b, y, start, count, steps, step_length, support) -> i
     widest = 0.0
     for i in range(count):
         widest = max(widest, support * sigma[b, 0, y, start + i])
-    return max(1, min(steps, int(widest / step_length)))
+    needed = max(1, min(steps, int(widest / step_length)))
+    # the quotient may round below a step that the comparison of each sample still takes
+    while needed < steps and (needed + 1) * step_length <= widest:
+        needed += 1
+    return needed
 
 
 @njit(parallel=True, cache=True, fastmath=FASTMATH)
@@ -213,14 +217,13 @@ def _dog_forward(image, direction, step, wide, narrow_coefficient, wide_coeffici
                 sums[1, b, c, y, x] = 0.0
             norm_narrow = norm_wide = 0.0
             ux, uy = direction[b, 0, y, x], direction[b, 1, y, x]
-            a_narrow, a_wide = narrow_coefficient[b, 0, y, x], wide_coefficient[b, 0, y, x]
-            reach = support * wide[b, 0, y, x]
+            spacing, reach = step[b, 0, y, x], support * wide[b, 0, y, x]
+            w_narrow, growth_narrow, ratio_narrow = _weight_recurrence(narrow_coefficient[b, 0, y, x], spacing)
+            w_wide, growth_wide, ratio_wide = _weight_recurrence(wide_coefficient[b, 0, y, x], spacing)
             for i in range(1, steps + 1):
-                distance = i * step[b, 0, y, x]
+                distance = i * spacing
                 if i > 1 and distance > reach:
                     break
-                w_narrow = math.exp(distance * distance * a_narrow)
-                w_wide = math.exp(distance * distance * a_wide)
                 xa0, xa1, fxa, _ = locate(x + distance * ux, width)
                 ya0, ya1, fya, _ = locate(y + distance * uy, height)
                 xb0, xb1, fxb, _ = locate(x - distance * ux, width)
@@ -233,6 +236,10 @@ def _dog_forward(image, direction, step, wide, narrow_coefficient, wide_coeffici
                     sums[1, b, c, y, x] += w_wide * both
                 norm_narrow += 2.0 * w_narrow
                 norm_wide += 2.0 * w_wide
+                w_narrow *= growth_narrow
+                growth_narrow *= ratio_narrow
+                w_wide *= growth_wide
+                growth_wide *= ratio_wide
             norms[0, b, 0, y, x] = norm_narrow
             norms[1, b, 0, y, x] = norm_wide
 
@@ -264,15 +271,15 @@ def _dog_backward(
             for x in range(width):
                 ux, uy = direction[b, 0, y, x], direction[b, 1, y, x]
                 a_narrow, a_wide = narrow_coefficient[b, 0, y, x], wide_coefficient[b, 0, y, x]
-                reach = support * wide[b, 0, y, x]
+                spacing, reach = step[b, 0, y, x], support * wide[b, 0, y, x]
+                w_narrow, growth_narrow, ratio_narrow = _weight_recurrence(a_narrow, spacing)
+                w_wide, growth_wide, ratio_wide = _weight_recurrence(a_wide, spacing)
                 g_norm_narrow, g_norm_wide = grad_norms[0, b, 0, y, x], grad_norms[1, b, 0, y, x]
                 g_ux = g_uy = g_step = g_a_narrow = g_a_wide = 0.0
                 for i in range(1, steps + 1):
-                    distance = i * step[b, 0, y, x]
+                    distance = i * spacing
                     if i > 1 and distance > reach:
                         break
-                    w_narrow = math.exp(distance * distance * a_narrow)
-                    w_wide = math.exp(distance * distance * a_wide)
                     xa0, xa1, fxa, clamp_xa = locate(x + distance * ux, width)
                     ya0, ya1, fya, clamp_ya = locate(y + distance * uy, height)
                     xb0, xb1, fxb, clamp_xb = locate(x - distance * ux, width)
@@ -282,21 +289,16 @@ def _dog_backward(
                     g_offset_x = g_offset_y = 0.0
                     for c in range(channels):
                         g_narrow, g_wide = grad_sums[0, b, c, y, x], grad_sums[1, b, c, y, x]
-                        both = interpolate(image, b, c, ya0, ya1, xa0, xa1, fya, fxa) + interpolate(
-                            image, b, c, yb0, yb1, xb0, xb1, fyb, fxb
-                        )
-                        g_w_narrow += g_narrow * both
-                        g_w_wide += g_wide * both
+                        ahead, slope_xa, slope_ya = interpolate_with_slopes(image, b, c, ya0, ya1, xa0, xa1, fya, fxa)
+                        behind, slope_xb, slope_yb = interpolate_with_slopes(image, b, c, yb0, yb1, xb0, xb1, fyb, fxb)
+                        g_w_narrow += g_narrow * (ahead + behind)
+                        g_w_wide += g_wide * (ahead + behind)
                         g_value = g_narrow * w_narrow + g_wide * w_wide
                         if need_image:
                             scatter(g_image, b, c, ya0, ya1, xa0, xa1, fya, fxa, g_value)
                             scatter(g_image, b, c, yb0, yb1, xb0, xb1, fyb, fxb, g_value)
-                        slope_x, slope_y = slopes(image, b, c, ya0, ya1, xa0, xa1, fya, fxa)
-                        g_offset_x += g_value * slope_x * clamp_xa
-                        g_offset_y += g_value * slope_y * clamp_ya
-                        slope_x, slope_y = slopes(image, b, c, yb0, yb1, xb0, xb1, fyb, fxb)
-                        g_offset_x -= g_value * slope_x * clamp_xb
-                        g_offset_y -= g_value * slope_y * clamp_yb
+                        g_offset_x += g_value * (slope_xa * clamp_xa - slope_xb * clamp_xb)
+                        g_offset_y += g_value * (slope_ya * clamp_ya - slope_yb * clamp_yb)
                     g_log_narrow, g_log_wide = g_w_narrow * w_narrow, g_w_wide * w_wide
                     g_a_narrow += g_log_narrow * distance * distance
                     g_a_wide += g_log_wide * distance * distance
@@ -308,6 +310,10 @@ def _dog_backward(
                         + 2.0 * distance * (g_log_narrow * a_narrow + g_log_wide * a_wide)
                     )
                     g_step += g_distance * i
+                    w_narrow *= growth_narrow
+                    growth_narrow *= ratio_narrow
+                    w_wide *= growth_wide
+                    growth_wide *= ratio_wide
                 g_maps[0, b, 0, y, x] = g_ux
                 g_maps[1, b, 0, y, x] = g_uy
                 g_maps[2, b, 0, y, x] = g_step

@@ -17,7 +17,15 @@ import torch
 from numba import njit, prange
 
 from wise.filters.fused import FASTMATH, chunks, full, kernel_threads, reduce_to
-from wise.filters.fused.bilinear import interpolate, locate, scatter, slopes
+from wise.filters.fused.bilinear import interpolate, interpolate_with_slopes, locate, scatter
+
+
+@njit(inline="always")
+def _gauss_recurrence(inv_sigma: float, step: float) -> tuple[float, float, float]:
+    """``g_1``, ``g_2 / g_1`` and the constant ratio of successive ratios of the weights
+    ``g_k = exp(-(k step / sigma)^2 / 2)``: each next weight is a product, not an exponential."""
+    unit = -0.5 * (step * inv_sigma) ** 2
+    return math.exp(unit), math.exp(3.0 * unit), math.exp(2.0 * unit)
 
 
 @njit(parallel=True, cache=True, fastmath=FASTMATH)
@@ -31,13 +39,14 @@ def _log_forward(image, direction, step, inv_sigma, steps, extent, second_v, gau
                 gauss_v[b, c, y, x] = 0.0
             second_sum = gauss_sum = second_u2 = gauss_u2 = 0.0
             ux, uy = direction[b, 0, y, x], direction[b, 1, y, x]
+            spacing, inverse = step[b, 0, y, x], inv_sigma[b, 0, y, x]
+            gauss, growth, ratio = _gauss_recurrence(inverse, spacing)
             for k in range(steps):
-                distance = (k + 1) * step[b, 0, y, x]
-                u = distance * inv_sigma[b, 0, y, x]
+                distance = (k + 1) * spacing
+                u = distance * inverse
                 if k > 0 and u > extent:
                     break
                 u_sq = u * u
-                gauss = math.exp(-0.5 * u_sq)
                 second = (u_sq - 1.0) * gauss
                 xa0, xa1, fxa, _ = locate(x + distance * ux, width)
                 ya0, ya1, fya, _ = locate(y + distance * uy, height)
@@ -53,6 +62,8 @@ def _log_forward(image, direction, step, inv_sigma, steps, extent, second_v, gau
                 gauss_sum += 2.0 * gauss
                 second_u2 += 2.0 * second * u_sq
                 gauss_u2 += 2.0 * gauss * u_sq
+                gauss *= growth
+                growth *= ratio
             moments[0, b, 0, y, x] = second_sum
             moments[1, b, 0, y, x] = gauss_sum
             moments[2, b, 0, y, x] = second_u2
@@ -88,13 +99,13 @@ def _log_backward(
                 g_second_sum, g_gauss_sum = grad_moments[0, b, 0, y, x], grad_moments[1, b, 0, y, x]
                 g_second_u2, g_gauss_u2 = grad_moments[2, b, 0, y, x], grad_moments[3, b, 0, y, x]
                 g_ux = g_uy = g_step = g_inverse = 0.0
+                gauss, growth, ratio = _gauss_recurrence(inverse, s)
                 for k in range(steps):
                     distance = (k + 1) * s
                     u = distance * inverse
                     if k > 0 and u > extent:
                         break
                     u_sq = u * u
-                    gauss = math.exp(-0.5 * u_sq)
                     second = (u_sq - 1.0) * gauss
                     xa0, xa1, fxa, clamp_xa = locate(x + distance * ux, width)
                     ya0, ya1, fya, clamp_ya = locate(y + distance * uy, height)
@@ -105,21 +116,16 @@ def _log_backward(
                     g_offset_x = g_offset_y = 0.0
                     for c in range(channels):
                         g_s, g_g = grad_second_v[b, c, y, x], grad_gauss_v[b, c, y, x]
-                        both = interpolate(image, b, c, ya0, ya1, xa0, xa1, fya, fxa) + interpolate(
-                            image, b, c, yb0, yb1, xb0, xb1, fyb, fxb
-                        )
-                        g_second += g_s * both
-                        g_gauss += g_g * both
+                        ahead, slope_xa, slope_ya = interpolate_with_slopes(image, b, c, ya0, ya1, xa0, xa1, fya, fxa)
+                        behind, slope_xb, slope_yb = interpolate_with_slopes(image, b, c, yb0, yb1, xb0, xb1, fyb, fxb)
+                        g_second += g_s * (ahead + behind)
+                        g_gauss += g_g * (ahead + behind)
                         g_both = g_s * second + g_g * gauss
                         if need_image:
                             scatter(g_image, b, c, ya0, ya1, xa0, xa1, fya, fxa, g_both)
                             scatter(g_image, b, c, yb0, yb1, xb0, xb1, fyb, fxb, g_both)
-                        slope_x, slope_y = slopes(image, b, c, ya0, ya1, xa0, xa1, fya, fxa)
-                        g_offset_x += g_both * slope_x * clamp_xa
-                        g_offset_y += g_both * slope_y * clamp_ya
-                        slope_x, slope_y = slopes(image, b, c, yb0, yb1, xb0, xb1, fyb, fxb)
-                        g_offset_x -= g_both * slope_x * clamp_xb
-                        g_offset_y -= g_both * slope_y * clamp_yb
+                        g_offset_x += g_both * (slope_xa * clamp_xa - slope_xb * clamp_xb)
+                        g_offset_y += g_both * (slope_ya * clamp_ya - slope_yb * clamp_yb)
                     # g'' = (u^2 - 1) g and g = exp(-u^2 / 2): back to u^2, then to u
                     g_gauss_total = g_gauss + g_second * (u_sq - 1.0)
                     g_u_sq = (
@@ -134,6 +140,8 @@ def _log_backward(
                     g_ux += g_offset_x * distance
                     g_uy += g_offset_y * distance
                     g_step += g_distance * (k + 1)
+                    gauss *= growth
+                    growth *= ratio
                 g_maps[0, b, 0, y, x] = g_ux
                 g_maps[1, b, 0, y, x] = g_uy
                 g_maps[2, b, 0, y, x] = g_step
