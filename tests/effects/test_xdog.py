@@ -75,8 +75,11 @@ def test_constant_mask_equals_global(effect, photo) -> None:
     base = effect.preset("portrait")[None]
     with torch.no_grad():
         global_out = effect(photo, base)
-        local_out = effect(photo, base[:, :, None, None].expand(-1, -1, 16, 16))
-    assert torch.allclose(global_out, local_out, atol=1e-5)
+        full_size = effect(photo, base[:, :, None, None].expand(-1, -1, *photo.shape[-2:]))
+        upsampled = effect(photo, base[:, :, None, None].expand(-1, -1, 16, 16))
+    assert torch.equal(global_out, full_size)
+    # upsampling a constant mask rounds some values by an ulp, which the line threshold magnifies
+    assert torch.allclose(global_out, upsampled, atol=1e-4)
 
 
 def test_quarter_resolution_mask_equals_upsampled_mask(effect, photo) -> None:

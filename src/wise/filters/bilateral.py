@@ -59,12 +59,6 @@ class _BilateralTaps(torch.autograd.Function):
 
     @staticmethod
     def backward(ctx, grad_total, grad_norm):  # type: ignore[override]
-        if fused.enabled(*ctx.saved_tensors, grad_total):
-            from wise.filters.fused.bilateral import bilateral_taps_backward
-
-            return bilateral_taps_backward(
-                ctx.saved_tensors, ctx.n, SUPPORT, grad_total, grad_norm, ctx.needs_input_grad
-            )
         image, direction, step, spatial, neg_a, neg_r = ctx.saved_tensors
         full = torch.broadcast_shapes(step.shape, neg_a.shape, neg_r.shape)
         g_image = torch.zeros_like(image)
@@ -154,7 +148,13 @@ def bilateral_pass(
     direction = direction.expand(image.shape[0], -1, -1, -1)
     step = pixel_step(direction)
 
-    total, norm = _BilateralTaps.apply(image, direction, step, spatial, neg_inv_two_spatial_sq, neg_inv_two_range_sq, n)
+    taps = (image, direction, step, spatial, neg_inv_two_spatial_sq, neg_inv_two_range_sq)
+    if fused.enabled(*taps):
+        from wise.filters.fused.bilateral import BilateralTaps
+
+        total, norm = BilateralTaps.apply(*taps, n, SUPPORT)
+    else:
+        total, norm = _BilateralTaps.apply(*taps, n)
     return (image + total) / (1.0 + norm)
 
 

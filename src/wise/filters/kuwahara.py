@@ -217,12 +217,13 @@ def anisotropic_kuwahara(
     minor = offset_grid(gradient_direction(tangent) * (r / stretch)) - centre
 
     taps = _sample_layout(sectors, samples_per_sector)
-    sums, square_sums = _SectorSums.apply(image, centre, major, minor, taps, sectors)
     total_weight = samples_per_sector + CENTRE_WEIGHT
-    if fused.enabled(image, sums, q):
-        from wise.filters.fused.kuwahara import SectorBlend
+    if fused.enabled(image, major, minor, q):
+        from wise.filters.fused.kuwahara import AnisotropicKuwahara
 
-        return SectorBlend.apply(image, sums, square_sums, q, float(total_weight), VARIANCE_SCALE, _VARIANCE_EPS)
+        settings = (taps, sectors, float(total_weight), VARIANCE_SCALE, _VARIANCE_EPS, torch.is_grad_enabled())
+        return AnisotropicKuwahara.apply(image, major, minor, q, *settings)
+    sums, square_sums = _SectorSums.apply(image, centre, major, minor, taps, sectors)
     mean_offsets = sums / total_weight
     variances = square_sums / total_weight - (mean_offsets * mean_offsets).sum(dim=2, keepdim=True)
     weights = _sector_weights(variances, q)
