@@ -21,6 +21,7 @@ import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
+import av
 import numpy as np
 import pytest
 import torch
@@ -97,11 +98,34 @@ def world(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     (root / "bad-photos").mkdir()
     photo.save(root / "bad-photos" / "good.png")
     (root / "bad-photos" / "broken.png").write_text("not an image")
+    (root / "clash").mkdir()
+    photo.save(root / "clash" / "a.png")
+    photo.save(root / "clash" / "a.jpg")
+    (root / "notes.mp4").write_text("not a video")
+    _media(root)
     (root / "read-only").mkdir()
     (root / "read-only").chmod(stat.S_IRUSR | stat.S_IXUSR)
     _models(root, photo)
     main(["effects"])  # imports done before the clock runs
     return {"root": root}
+
+
+def _media(root: Path) -> None:
+    """``clip.mp4`` (4 frames, no sound) and ``sound.mp4`` (sound, no pictures)."""
+    with av.open(str(root / "clip.mp4"), "w") as container:
+        stream = container.add_stream("libx264", rate=24)
+        stream.width, stream.height, stream.pix_fmt = 64, 48, "yuv420p"
+        for _ in range(4):
+            frame = av.VideoFrame.from_ndarray(np.zeros((48, 64, 3), np.uint8), format="rgb24")
+            container.mux(stream.encode(frame))
+        container.mux(stream.encode(None))
+    with av.open(str(root / "sound.mp4"), "w") as container:
+        stream = container.add_stream("aac", rate=44100)
+        tone = (0.1 * np.sin(np.arange(44100) / 10)).astype(np.float32)[None]
+        frame = av.AudioFrame.from_ndarray(tone, format="fltp", layout="mono")
+        frame.sample_rate = 44100
+        container.mux(stream.encode(frame))
+        container.mux(stream.encode(None))
 
 
 def _models(root: Path, photo: Image.Image) -> None:
@@ -295,8 +319,8 @@ CASES: dict[str, Case] = {
     "bench pairs: html page of another kind": Case(
         PAIRS + " {root}/xdog-local.safetensors --html {root}/page.png", ".html"
     ),
-    "apply: --model without a CNN": Case(
-        APPLY + " --params {root}/xdog.safetensors --model {root}/xdog-local.safetensors", "not a model with a CNN"
+    "apply: --params with a local model": Case(
+        APPLY + " --params {root}/xdog.safetensors --model {root}/xdog-local.safetensors", "paints the masks"
     ),
     "predict: a CNN alone without its model": Case(
         "predict none --content {root}/photo.png -o {root}/pred", "pass its --model"
@@ -348,6 +372,32 @@ CASES: dict[str, Case] = {
     "apply: quality above 100": Case(APPLY + " --quality 101", "--quality: must be from 1 to 100"),
     "apply: negative quality": Case(APPLY + " --quality -5", "--quality"),
     "apply: unknown device": Case(APPLY + " --device tpu", "invalid choice"),
+    # apply: many images and videos
+    "apply: empty folder": Case("apply xdog {root}/no-photos -o {root}/styled", "no images"),
+    "apply: pattern matching nothing": Case("apply xdog {root}/photos/*.webp -o {root}/styled", "matches no image"),
+    "apply: output folder is a file": Case("apply xdog {root}/photos -o {root}/a-file", "not a directory"),
+    "apply: output inside an input folder": Case(
+        "apply xdog {root}/photos -o {root}/photos/styled", "inside the input folder"
+    ),
+    "apply: unwritable output folder": Case(
+        "apply xdog {root}/photos -o {root}/read-only/styled", "cannot write", needs_user=True
+    ),
+    "apply: images to one image file": Case("apply xdog {root}/photos -o {root}/out.png", "give a folder name"),
+    "apply: two images, one output": Case("apply xdog {root}/clash -o {root}/styled", "would be written there"),
+    "apply: log file is a folder": Case(
+        "apply xdog {root}/photos -o {root}/styled --log {root}/folder.png", "is a directory"
+    ),
+    "apply: --format for one image": Case(APPLY + " --format jpg", "extension chooses"),
+    "apply: --ray-address without --ray": Case(
+        "apply xdog {root}/photos -o {root}/styled --ray-address 127.0.0.1:6379", "add --ray"
+    ),
+    "apply: video without a video stream": Case("apply xdog {root}/sound.mp4 -o {root}/out.mp4", "no video stream"),
+    "apply: text as video": Case("apply xdog {root}/notes.mp4 -o {root}/out.mp4", "not a video"),
+    "apply: video to an image file": Case("apply xdog {root}/clip.mp4 -o {root}/out.png", "use one of"),
+    "apply: --crf for an image": Case(APPLY + " --crf 20", "for a video"),
+    "apply: smoothing of 1": Case(
+        "apply xdog {root}/clip.mp4 -o {root}/out.mp4 --temporal-smoothing 1", "--temporal-smoothing"
+    ),
     # apply: input images
     "apply: text as image": Case("apply xdog {root}/notes.png -o {root}/out.png", "not an image"),
     "apply: empty image": Case("apply xdog {root}/empty.png -o {root}/out.png", "empty"),

@@ -4,28 +4,42 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
+from pathlib import Path
 from typing import TextIO
 
 import numpy as np
 
 from wise import effects
+from wise.batch.inputs import PARAMS_SUFFIX, Job, is_batch, is_video, plan
+from wise.batch.look import Look, LookSpec
+from wise.batch.run import JsonLog, run_jobs, write
 from wise.cli import args as types
 from wise.cli.effects import fmt
-from wise.cli.outputs import output_file
-from wise.cli.parser import add_device, add_pixel_limit, add_size, command, device
+from wise.cli.outputs import OutputFolder, output_file
+from wise.cli.parser import (
+    EXIT_FAILURE,
+    EXIT_INTERRUPTED,
+    PROG,
+    add_device,
+    add_pixel_limit,
+    add_size,
+    command,
+    device,
+)
 from wise.effects.base import Effect
 from wise.errors import WiseError
 from wise.gallery import make_sheet
 from wise.io import WRITE_FORMATS, image_to_tensor, read_image, write_image
-from wise.paramfile import load_params
-from wise.ppn.predictor import LocalPredictor
-from wise.render import render
+from wise.ppn.translation import NO_EFFECT
 
 
-def parse_set(item: str, effect: Effect) -> tuple[int, float]:
-    """``NAME=VALUE`` in real units to (parameter index, normalized value)."""
+def parse_set(item: str, effect: Effect | None) -> tuple[str, float]:
+    """``NAME=VALUE`` in real units, checked against ``effect``: (name, value)."""
     name, sep, text = item.partition("=")
     name, text = name.strip(), text.strip()
+    if effect is None:
+        raise WiseError("--set: the effect 'none' has no parameters")
     if not sep or not name or not text:
         raise WiseError(f"--set {item!r}: expected NAME=VALUE, e.g. --set {effect.param_names[0]}=0")
     spec = effect.spec(name)
@@ -37,49 +51,120 @@ def parse_set(item: str, effect: Effect) -> tuple[int, float]:
         raise WiseError(f"--set {name}={text}: the value must be a finite number")
     if not spec.in_range(value):
         raise WiseError(f"--set {name}={text}: outside the range [{fmt(spec.min)}, {fmt(spec.max)}] of {name}")
-    return effect.param_names.index(name), spec.to_normalized(value)
+    return name, value
+
+
+def _look(args: argparse.Namespace) -> LookSpec:
+    """The look of the command line, its names and numbers checked (files are read by :class:`Look`)."""
+    if args.params and args.preset:
+        raise WiseError("--params and --preset cannot be combined; edit the file's values with --set instead")
+    effect = None if args.effect == NO_EFFECT else effects.create(args.effect)
+    settings = tuple(parse_set(item, effect) for item in args.set)
+    return LookSpec(
+        args.effect, preset=args.preset, params=args.params, settings=settings, model=args.model,
+        kernel_size=args.kernel_size, device=str(device(args.device)),
+    )  # fmt: skip
 
 
 def run_apply(args: argparse.Namespace, out: TextIO) -> int:
-    if args.params and args.preset:
-        raise WiseError("--params and --preset cannot be combined; edit the file's values with --set instead")
-    options: dict[str, object] = {}
-    if args.kernel_size is not None:
-        options["kernel_size"] = args.kernel_size
-    effect = effects.create(args.effect, **options)
-    if args.params:
-        params = load_params(args.params, effect)
-    elif args.preset:
-        params = effect.preset(args.preset).unsqueeze(0)
-    else:
-        params = effect.default_params().unsqueeze(0)
-    params = params.clone()
-    for index, value in (parse_set(item, effect) for item in args.set):
-        params[:, index] = value
-    output = output_file(
-        args.output, {"image": args.input, "--params": args.params, "--model": args.model}, WRITE_FORMATS
-    )
-    target_device = device(args.device)
-    translator = _translator(args, target_device)
-    image = read_image(args.input)
-    if translator is not None:
-        result = translator.finish(image, params).result
-    else:
-        result = render(effect.to(target_device).eval(), image, params, device=target_device)
-    write_image(result, output, quality=args.quality)
+    if args.ray_address and not args.ray:
+        raise WiseError("--ray-address is where --ray renders; add --ray, or leave the address out")
+    spec = _look(args)
+    if len(args.inputs) == 1 and is_video(args.inputs[0]) and not Path(args.inputs[0]).is_dir():
+        return _apply_video(args, spec, out)
+    if is_batch(args.inputs):
+        return _apply_batch(args, spec, out)
+    return _apply_one(args, spec)
+
+
+def _refuse_video_options(args: argparse.Namespace) -> None:
+    for option, given in (("--crf", args.crf), ("--codec", args.codec)):
+        if given is not None:
+            raise WiseError(f"{option} is for a video input; leave it out for images")
+
+
+def _apply_one(args: argparse.Namespace, spec: LookSpec) -> int:
+    """One image to one file, as every image of a batch."""
+    _refuse_video_options(args)
+    if args.format is not None:
+        raise WiseError(f"--format is for a folder of results; {args.output}'s own extension chooses its format")
+    inputs = {"image": args.inputs[0], "--params": args.params, "--model": args.model}
+    output = output_file(args.output, inputs, WRITE_FORMATS)
+    params_file = output.with_suffix(PARAMS_SUFFIX) if args.save_params else None
+    if params_file is not None:
+        output_file(params_file, inputs, (PARAMS_SUFFIX,))
+    look = Look(spec)
+    write(Job(Path(args.inputs[0]), output, params_file), look.render(read_image(args.inputs[0])), look, args.quality)
     return 0
 
 
-def _translator(args: argparse.Namespace, target_device: str) -> LocalPredictor | None:
-    """The model of ``--model``: a translator of the effect with a CNN after it."""
-    if args.model is None:
-        return None
-    predictor = LocalPredictor(args.model, args.effect, target_device)
-    if not predictor.translates or predictor.network.post is None:
+def _apply_batch(args: argparse.Namespace, spec: LookSpec, out: TextIO) -> int:
+    """Many images into the folder OUT, resumable; exit 1 when an image failed."""
+    _refuse_video_options(args)
+    jobs = plan(args.inputs, args.output, args.format or "png", args.save_params)
+    if Path(args.output).suffix.lower() in WRITE_FORMATS and not Path(args.output).is_dir():
         raise WiseError(
-            f"--model {args.model}: not a model with a CNN after the effect; apply its masks with --params alone"
+            f"{args.output}: several images are written to a folder; give a folder name, not an image file"
         )
-    return predictor
+    OutputFolder(args.output, (), {}).check()
+    sources = {str(job.source.resolve()) for job in jobs}
+    if args.log is not None:
+        output_file(args.log, {"--log": None})
+        if str(Path(args.log).resolve()) in sources:
+            raise WiseError(f"{args.log}: is one of the input images; write the log to another file")
+    if args.ray:
+        from wise.batch.distributed import require_ray, run_on_ray
+
+        require_ray()
+        summary = run_on_ray(
+            spec, jobs, address=args.ray_address, gpus_per_worker=args.ray_gpus_per_worker, quality=args.quality,
+            overwrite=args.overwrite, log=JsonLog(args.log), progress=_progress_shown(),
+        )  # fmt: skip
+    else:
+        look = Look(spec)
+        journal = JsonLog(args.log)
+        try:
+            summary = run_jobs(
+                look, jobs, workers=args.workers, quality=args.quality, overwrite=args.overwrite, log=journal,
+                progress=_progress_shown(), report=lambda o: print(f"{PROG}: failed: {o.error}", file=sys.stderr),
+            )  # fmt: skip
+        finally:
+            journal.close()
+    if args.ray:
+        for failure in summary.failed:
+            print(f"{PROG}: failed: {failure.error}", file=sys.stderr)
+    print(summary.line(), file=out, flush=True)
+    if summary.interrupted:
+        return EXIT_INTERRUPTED
+    return EXIT_FAILURE if summary.failed else 0
+
+
+def _apply_video(args: argparse.Namespace, spec: LookSpec, out: TextIO) -> int:
+    """A video decoded, stylized and encoded frame by frame."""
+    from wise.batch.video import VIDEO_OUTPUT_SUFFIXES, check_video_output, probe, stylize_video
+
+    for option, given in (("--ray", args.ray), ("--save-params", args.save_params), ("--format", args.format)):
+        if given:
+            raise WiseError(f"{option} is for images; a video is stylized frame by frame into one video file")
+    check_video_output(args.output, args.codec)
+    output = output_file(args.output, {"video": args.inputs[0], "--params": args.params, "--model": args.model},
+                         VIDEO_OUTPUT_SUFFIXES)  # fmt: skip
+    info = probe(args.inputs[0])
+    look = Look(spec)
+    result = stylize_video(
+        look, Path(args.inputs[0]), output, crf=args.crf, codec=args.codec,
+        temporal_smoothing=args.temporal_smoothing, progress=_progress_shown(),
+    )  # fmt: skip
+    if result.interrupted:
+        return EXIT_INTERRUPTED
+    rate = result.frames / result.seconds if result.seconds > 0 else 0.0
+    print(f"{result.frames} frames of {info.width}x{info.height} in {result.seconds:.1f} s ({rate:.2f} frames/s): "
+          f"{output}", file=out)  # fmt: skip
+    return 0
+
+
+def _progress_shown() -> bool:
+    return sys.stderr.isatty()
 
 
 def run_gallery(args: argparse.Namespace, out: TextIO) -> int:
@@ -100,17 +185,30 @@ def run_gallery(args: argparse.Namespace, out: TextIO) -> int:
 
 
 def register(commands: argparse._SubParsersAction) -> None:
-    apply = command(commands, "apply", "stylize an image with an effect")
-    apply.add_argument("effect", metavar="EFFECT", help="effect name (see 'wise effects')")
-    apply.add_argument("input", metavar="INPUT", help="input image (PNG, JPEG, WebP or TIFF)")
-    apply.add_argument("-o", "--output", required=True, metavar="OUTPUT", help="output image (.png, .jpg or .jpeg)")
+    apply = command(commands, "apply", "stylize images, folders of images or a video with an effect")
+    apply.add_argument("effect", metavar="EFFECT", help="effect name (see 'wise effects'); none for a CNN-only model")
+    apply.add_argument(
+        "inputs",
+        nargs="+",
+        metavar="INPUT",
+        help="images (PNG, JPEG, WebP, TIFF), folders (searched recursively), quoted glob patterns, "
+        "or one video (mp4, mov, mkv, webm)",
+    )
+    apply.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        metavar="OUT",
+        help="the result: an image file (.png, .jpg) for one image; a folder for several images, a folder "
+        "or a pattern (each result keeps its path relative to its input folder); a video file for a video",
+    )
     apply.add_argument("--preset", metavar="NAME", help="start from this preset instead of the defaults")
     apply.add_argument("--params", metavar="FILE", help="start from a parameter file (global or local masks)")
     apply.add_argument(
         "--model",
         metavar="FILE",
-        help="a model of 'wise train local --post': run its CNN after the effect (at the model's working size), "
-        "e.g. on masks it painted and you edited",
+        help="a local model (file or builtin:TASK): it paints each image's masks as 'wise predict' does; "
+        "a model with a CNN after the effect renders with --params/--preset when given, else with its own masks",
     )
     apply.add_argument(
         "--set",
@@ -127,7 +225,36 @@ def register(commands: argparse._SubParsersAction) -> None:
         help=f"filter samples per side, 1 to {types.MAX_KERNEL_SIZE} (quality/speed)",
     )
     apply.add_argument("--quality", type=types.quality, default=95, metavar="Q", help="JPEG quality 1-100 (default 95)")
+    apply.add_argument(
+        "--save-params",
+        action="store_true",
+        help="also write each result's parameters (masks) next to it as NAME.safetensors, editable later",
+    )
     add_pixel_limit(apply)
+    many = apply.add_argument_group("many images")
+    many.add_argument("--format", choices=("png", "jpg"), help="format of the results in a folder (default png)")
+    many.add_argument(
+        "--workers", type=types.whole_number(1, 64), default=2, metavar="N",
+        help="threads that read images ahead of the render and write results behind it (default 2)",
+    )  # fmt: skip
+    many.add_argument("--overwrite", action="store_true", help="render again the images whose results exist")
+    many.add_argument("--log", metavar="FILE", help="write one JSON line per input (input, output, status, error)")
+    many.add_argument("--ray", action="store_true", help="render on a Ray cluster (needs: pip install 'wise[ray]')")
+    many.add_argument(
+        "--ray-address", metavar="ADDR", help="the cluster to join, e.g. HOST:6379 (default: a local Ray instance)"
+    )
+    many.add_argument(
+        "--ray-gpus-per-worker", type=types.finite_float(0.0, 16.0), default=0.0, metavar="G",
+        help="GPUs for each rendering actor (default 0; 1 with --device cuda)",
+    )  # fmt: skip
+    video = apply.add_argument_group("video")
+    video.add_argument("--crf", type=types.whole_number(0, 63), metavar="N", help="encoder quality (lower is better)")
+    video.add_argument("--codec", metavar="NAME", help="video encoder (default libx264; libvpx-vp9 for .webm)")
+    video.add_argument(
+        "--temporal-smoothing", type=types.finite_float(0.0, 1.0, below=True), default=0.3, metavar="A",
+        help="with a local model, each frame's masks are A times the last frame's plus (1 - A) times its own "
+        "(default 0.3; 0 switches it off)",
+    )  # fmt: skip
     apply.set_defaults(func=run_apply)
 
     gallery = command(commands, "gallery", "every effect and preset on one labelled contact sheet")
