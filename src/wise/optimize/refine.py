@@ -50,6 +50,14 @@ def _sides(content: torch.Tensor) -> list[tuple[int, float, float]]:
     return levels
 
 
+def _compile_kernels(effect: Effect, content: torch.Tensor, start: torch.Tensor) -> None:
+    """One forward and backward pass on a thumbnail: the first of a process compiles (or loads)
+    the fused CPU kernels, which must not eat the refinement's budget."""
+    thumbnail = F.interpolate(content, size=(32, 32), mode="area")
+    params = start.detach().clone().to(content.device).requires_grad_(True)
+    effect(thumbnail, params).mean().backward()
+
+
 def refine(
     effect: Effect,
     content: torch.Tensor,
@@ -66,6 +74,7 @@ def refine(
     the levels (at least one each)."""
     if not budget > 0:
         raise WiseError(f"the refinement budget must be positive, got {budget}")
+    _compile_kernels(effect, content, start)
     began = time.perf_counter()
     # the first optimizer of a process imports the compiler stack (seconds): inside the budget,
     # but before the levels share it out
