@@ -146,7 +146,7 @@ def _apply_video(args: argparse.Namespace, spec: LookSpec, out: TextIO) -> int:
     for option, given in (("--ray", args.ray), ("--save-params", args.save_params), ("--format", args.format)):
         if given:
             raise WiseError(f"{option} is for images; a video is stylized frame by frame into one video file")
-    check_video_output(args.output, args.codec)
+    check_video_output(args.output, args.codec, crf=args.crf)
     output = output_file(args.output, {"video": args.inputs[0], "--params": args.params, "--model": args.model},
                          VIDEO_OUTPUT_SUFFIXES)  # fmt: skip
     info = probe(args.inputs[0])
