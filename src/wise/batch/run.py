@@ -110,17 +110,22 @@ def stylize_one(look: Look, job: Job, quality: int = 95) -> Outcome:
 
 
 class JsonLog:
-    """``--log FILE``: one JSON object per input and line, flushed as each input ends."""
+    """``--log FILE``: one JSON object per input and line, flushed as each input ends. The file
+    is created with the first line, so a run refused before its work leaves none."""
 
     def __init__(self, path: str | os.PathLike[str] | None) -> None:
-        self.file: TextIO | None = None if path is None else open(path, "w", encoding="utf-8")
+        self.path = path
+        self.file: TextIO | None = None
 
     def write(self, outcome: Outcome) -> None:
-        if self.file is not None:
-            record = asdict(outcome)
-            record["seconds"] = round(record["seconds"], 4)
-            self.file.write(json.dumps(record) + "\n")
-            self.file.flush()
+        if self.path is None:
+            return
+        if self.file is None:
+            self.file = open(self.path, "w", encoding="utf-8")
+        record = asdict(outcome)
+        record["seconds"] = round(record["seconds"], 4)
+        self.file.write(json.dumps(record) + "\n")
+        self.file.flush()
 
     def close(self) -> None:
         if self.file is not None:
@@ -256,17 +261,16 @@ def stylize(
             model=None if model is None else str(model), kernel_size=kernel_size, device=device,
         )  # fmt: skip
     jobs = plan([str(i) for i in inputs], out, format, save_params)
-    if ray:
-        from wise.batch.distributed import run_on_ray
-
-        return run_on_ray(
-            spec, jobs, address=ray_address, gpus_per_worker=ray_gpus_per_worker, quality=quality,
-            overwrite=overwrite, log=JsonLog(log), progress=progress,
-        )  # fmt: skip
-    look = Look(spec)
     journal = JsonLog(log)
     try:
-        return run_jobs(look, jobs, workers=workers, quality=quality, overwrite=overwrite, log=journal,
+        if ray:
+            from wise.batch.distributed import run_on_ray
+
+            return run_on_ray(
+                spec, jobs, address=ray_address, gpus_per_worker=ray_gpus_per_worker, quality=quality,
+                overwrite=overwrite, log=journal, progress=progress,
+            )  # fmt: skip
+        return run_jobs(Look(spec), jobs, workers=workers, quality=quality, overwrite=overwrite, log=journal,
                         progress=progress)  # fmt: skip
     finally:
         journal.close()

@@ -62,8 +62,15 @@ def _look(args: argparse.Namespace) -> LookSpec:
     settings = tuple(parse_set(item, effect) for item in args.set)
     return LookSpec(
         args.effect, preset=args.preset, params=args.params, settings=settings, model=args.model,
-        kernel_size=args.kernel_size, device=str(device(args.device)),
+        kernel_size=args.kernel_size, device=_device_name(args),
     )  # fmt: skip
+
+
+def _device_name(args: argparse.Namespace) -> str:
+    """``--device``; with ``--ray``, ``cuda`` names the actors' device, which this machine may lack."""
+    if args.ray and args.device == "cuda":
+        return "cuda"
+    return str(device(args.device))
 
 
 def run_apply(args: argparse.Namespace, out: TextIO) -> int:
@@ -103,36 +110,32 @@ def _apply_batch(args: argparse.Namespace, spec: LookSpec, out: TextIO) -> int:
     _refuse_video_options(args)
     jobs = plan(args.inputs, args.output, args.format or "png", args.save_params)
     if Path(args.output).suffix.lower() in WRITE_FORMATS and not Path(args.output).is_dir():
-        raise WiseError(
-            f"{args.output}: several images are written to a folder; give a folder name, not an image file"
-        )
+        raise WiseError(f"{args.output}: several images are written to a folder; give a folder name, not an image file")
     OutputFolder(args.output, (), {}).check()
     sources = {str(job.source.resolve()) for job in jobs}
     if args.log is not None:
         output_file(args.log, {"--log": None})
         if str(Path(args.log).resolve()) in sources:
             raise WiseError(f"{args.log}: is one of the input images; write the log to another file")
-    if args.ray:
-        from wise.batch.distributed import require_ray, run_on_ray
+    journal = JsonLog(args.log)
+    try:
+        if args.ray:
+            from wise.batch.distributed import require_ray, run_on_ray
 
-        require_ray()
-        summary = run_on_ray(
-            spec, jobs, address=args.ray_address, gpus_per_worker=args.ray_gpus_per_worker, quality=args.quality,
-            overwrite=args.overwrite, log=JsonLog(args.log), progress=_progress_shown(),
-        )  # fmt: skip
-    else:
-        look = Look(spec)
-        journal = JsonLog(args.log)
-        try:
+            require_ray()
+            summary = run_on_ray(
+                spec, jobs, address=args.ray_address, gpus_per_worker=args.ray_gpus_per_worker,
+                quality=args.quality, overwrite=args.overwrite, log=journal, progress=_progress_shown(),
+            )  # fmt: skip
+            for failure in summary.failed:
+                print(f"{PROG}: failed: {failure.error}", file=sys.stderr)
+        else:
             summary = run_jobs(
-                look, jobs, workers=args.workers, quality=args.quality, overwrite=args.overwrite, log=journal,
+                Look(spec), jobs, workers=args.workers, quality=args.quality, overwrite=args.overwrite, log=journal,
                 progress=_progress_shown(), report=lambda o: print(f"{PROG}: failed: {o.error}", file=sys.stderr),
             )  # fmt: skip
-        finally:
-            journal.close()
-    if args.ray:
-        for failure in summary.failed:
-            print(f"{PROG}: failed: {failure.error}", file=sys.stderr)
+    finally:
+        journal.close()
     print(summary.line(), file=out, flush=True)
     if summary.interrupted:
         return EXIT_INTERRUPTED
