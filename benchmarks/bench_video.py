@@ -68,6 +68,10 @@ def frame_change(path: Path) -> float:
 
 
 def parse_look(text: str) -> LookSpec:
+    """``EFFECT[:PRESET]`` or ``EFFECT@MODEL`` (a local model, e.g. ``xdog@builtin:contours``)."""
+    if "@" in text:
+        effect, _, model = text.partition("@")
+        return LookSpec(effect, model=model)
     effect, _, preset = text.partition(":")
     return LookSpec(effect, preset=preset or None)
 
@@ -78,7 +82,13 @@ def main() -> None:
     parser.add_argument("--width", type=int, default=640)
     parser.add_argument("--height", type=int, default=360)
     parser.add_argument("--step", type=int, default=4, help="pixels the window moves per frame")
-    parser.add_argument("--looks", nargs="+", default=["xdog:portrait", "cartoon"], help="EFFECT[:PRESET]")
+    parser.add_argument(
+        "--looks", nargs="+", default=["xdog:portrait", "cartoon", "xdog@builtin:contours"],
+        help="EFFECT[:PRESET] or EFFECT@MODEL",
+    )  # fmt: skip
+    parser.add_argument(
+        "--smoothing", nargs="+", type=float, default=[0.0, 0.3], help="temporal smoothing of a model's masks"
+    )
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as folder:
         folder = Path(folder)
@@ -91,15 +101,18 @@ def main() -> None:
         write_clip(clips["still"], [window[0]] * args.frames)
         changes = {name: frame_change(path) for name, path in clips.items()}
         print(f"{args.frames} frames {args.width}x{args.height}, pan {args.step} px/frame; change in 0-255 units")
-        print("| look | clip | frames/s | input change | output change |")
-        print("| --- | --- | --- | --- | --- |")
+        print("| look | smoothing | clip | frames/s | input change | output change |")
+        print("| --- | --- | --- | --- | --- | --- |")
         for text in args.looks:
             look = Look(parse_look(text))
-            for name, path in clips.items():
-                output = folder / f"{name}-out.mp4"
-                result = stylize_video(look, path, output)
-                rate = result.frames / result.seconds
-                print(f"| {text} | {name} | {rate:.2f} | {changes[name]:.2f} | {frame_change(output):.2f} |")
+            for amount in args.smoothing if look.paints else [None]:
+                for name, path in clips.items():
+                    output = folder / f"{name}-out.mp4"
+                    result = stylize_video(look, path, output, temporal_smoothing=amount or 0.0)
+                    rate = result.frames / result.seconds
+                    shown = "-" if amount is None else f"{amount:g}"
+                    change = frame_change(output)
+                    print(f"| {text} | {shown} | {name} | {rate:.2f} | {changes[name]:.2f} | {change:.2f} |")
 
 
 if __name__ == "__main__":
