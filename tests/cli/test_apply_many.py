@@ -161,3 +161,16 @@ def test_ctrl_c_leaves_complete_files_and_the_same_command_finishes(tmp_path: Pa
     assert finished.returncode == 0, finished.stderr
     assert f"{20 - len(written)} written, {len(written)} skipped" in finished.stdout
     assert len(list(out.glob("*.png"))) == 20
+
+
+def test_images_above_the_pixel_limit_fail_by_name_and_the_rest_render(
+    tree: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tree / "limited"
+    code, stdout, stderr = _run(
+        ["apply", "xdog", str(tree / "photos"), "-o", str(out), "--max-pixels", "20000"], capsys
+    )
+    assert code == 1
+    assert "astronaut.png" in stderr and "coffee.jpg" in stderr and "broken.jpg" in stderr, stderr
+    assert sorted(_times(out)) == ["cats/chelsea.png", "cats/older/flipped.png"]
+    assert "2 written" in stdout and "3 failed" in stdout
