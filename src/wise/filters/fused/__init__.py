@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import importlib.util
 import os
+import signal
 import threading
 from contextlib import contextmanager
 from typing import Iterator
@@ -77,10 +78,32 @@ def _numba():
 
 
 @contextmanager
+def _interrupt_after() -> Iterator[None]:
+    """Hold Ctrl-C (SIGINT) until the block ends, then deliver it to the handler that was there.
+
+    A kernel's first call compiles it, and LLVM reports to Python through ctypes callbacks, which
+    swallow an exception raised in them: a Ctrl-C that lands there would be lost. Signals are
+    handled only in the main thread, so elsewhere the block runs as it is."""
+    previous = signal.getsignal(signal.SIGINT)
+    if threading.current_thread() is not threading.main_thread() or not callable(previous):
+        yield
+        return
+    received: list[object] = []
+    signal.signal(signal.SIGINT, lambda signum, frame: received.append(frame))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if received:
+            previous(signal.SIGINT, received[0])
+
+
+@contextmanager
 def kernel_threads() -> Iterator[None]:
-    """Run a kernel with PyTorch's thread count, one kernel at a time in the process."""
+    """Run a kernel with PyTorch's thread count, one kernel at a time in the process; a Ctrl-C
+    during the kernel (or its compilation) takes effect when it returns."""
     numba = _numba()
-    with _lock:
+    with _lock, _interrupt_after():
         torch_threads = torch.get_num_threads()
         numba.set_num_threads(max(1, min(torch_threads, numba.config.NUMBA_NUM_THREADS)))
         try:

@@ -28,6 +28,7 @@ import torch
 from numba import njit, prange
 
 from wise.filters.fused import FASTMATH, chunks, full, kernel_threads, reduce_to
+from wise.filters.fused.bilinear import locate
 
 _SOFTPLUS_GROWTH_THRESHOLD = math.exp(20.0)
 """``exp`` of the input above which :func:`torch.nn.functional.softplus` returns its input (its
@@ -57,18 +58,6 @@ def tap_arrays(taps: Sequence) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 @njit(inline="always")
-def _locate(position: float, size: int) -> tuple[int, int, float, float]:
-    """Lower and upper neighbour along one axis, the fraction towards the upper one, and the
-    derivative of the border-clamped position (0 where clamped, as in ``grid_sample``)."""
-    if position <= 0.0:
-        return 0, 0, 0.0, 0.0
-    if position >= size - 1:
-        return size - 1, size - 1, 0.0, 0.0
-    lower = int(position)
-    return lower, lower + 1, position - lower, 1.0
-
-
-@njit(inline="always")
 def _sample_sectors(
     picture, y, x, major_x, major_y, minor_x, minor_y, positions, index, weight, sums, squares, channels
 ):
@@ -81,8 +70,8 @@ def _sample_sectors(
         along, across = positions[t, 0], positions[t, 1]
         first, second = index[t, 0], index[t, 1]
         first_weight, second_weight = weight[t, 0], weight[t, 1]
-        x0, x1, fx, _ = _locate(x + along * major_x + across * minor_x, width)
-        y0, y1, fy, _ = _locate(y + along * major_y + across * minor_y, height)
+        x0, x1, fx, _ = locate(x + along * major_x + across * minor_x, width)
+        y0, y1, fy, _ = locate(y + along * major_y + across * minor_y, height)
         square = 0.0
         for c in range(channels):
             top = picture[y0, x0, c] + fx * (picture[y0, x1, c] - picture[y0, x0, c])
@@ -257,8 +246,8 @@ def _backward_pixel(
         along, across = positions[t, 0], positions[t, 1]
         first, second = index[t, 0], index[t, 1]
         first_weight, second_weight = weight[t, 0], weight[t, 1]
-        x0, x1, fx, x_slope = _locate(x + along * major_x + across * minor_x, width)
-        y0, y1, fy, y_slope = _locate(y + along * major_y + across * minor_y, height)
+        x0, x1, fx, x_slope = locate(x + along * major_x + across * minor_x, width)
+        y0, y1, fy, y_slope = locate(y + along * major_y + across * minor_y, height)
         g_square = 2.0 * (first_weight * g_squares[first] + second_weight * g_squares[second])
         g_x = g_y = 0.0
         for c in range(channels):
