@@ -393,9 +393,7 @@ CASES: dict[str, Case] = {
     ),
     "apply: video without a video stream": Case("apply xdog {root}/sound.mp4 -o {root}/out.mp4", "no video stream"),
     "apply: text as video": Case("apply xdog {root}/notes.mp4 -o {root}/out.mp4", "not a video"),
-    "apply: video to an image file": Case(
-        "apply xdog {root}/clip.mp4 -o {root}/out.png", "a video is written as"
-    ),
+    "apply: video to an image file": Case("apply xdog {root}/clip.mp4 -o {root}/out.png", "a video is written as"),
     "apply: --crf for an image": Case(APPLY + " --crf 20", "for a video"),
     "apply: smoothing of 1": Case(
         "apply xdog {root}/clip.mp4 -o {root}/out.mp4 --temporal-smoothing 1", "--temporal-smoothing"
