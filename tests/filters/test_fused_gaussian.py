@@ -75,4 +75,3 @@ def test_varying_blur_runs_the_fused_kernel_only_when_asked(monkeypatch: pytest.
         with kernels(path):
             gaussian_blur(torch.rand(1, 1, 8, 8), sigma, scale=1.0)
     assert calls == [1, 1]
-

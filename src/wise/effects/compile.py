@@ -1,0 +1,53 @@
+"""Compile the fused CPU kernels of every effect ahead of use: ``python -m wise.effects.compile``.
+
+The kernels (:mod:`wise.filters.fused`) compile on their first call and are cached on disk, so
+only the first process pays. This runs each effect's forward and backward pass once on a
+thumbnail, with global values and with per-pixel masks, for the given dtypes; each dtype
+in a process of its own, all at once, so that the compilations share the cores. Useful
+after installing (e.g. in a container image) and before timing anything.
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import time
+
+import torch
+
+from wise import effects
+
+DTYPES = {"float32": torch.float32, "float64": torch.float64}
+
+
+def compile_kernels(dtype: torch.dtype = torch.float32, size: int = 48) -> None:
+    """One forward and backward pass of every effect on a ``size`` x ``size`` thumbnail in
+    ``dtype``, with global values and with masks."""
+    image = torch.rand(1, 3, size, size, dtype=dtype)
+    for name in effects.available():
+        effect = effects.create(name).to(dtype)
+        start = effect.default_params()[None].to(dtype)
+        for params in (start, start[:, :, None, None].expand(-1, -1, size // 4, size // 4)):
+            params = params.clone().requires_grad_(True)
+            picture = image.clone().requires_grad_(True)
+            effect(picture, params).mean().backward()
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m wise.effects.compile", description=__doc__.splitlines()[0])
+    parser.add_argument("dtypes", nargs="*", choices=sorted(DTYPES), default=["float32"])
+    args = parser.parse_args(argv)
+    began = time.perf_counter()
+    if len(args.dtypes) == 1:
+        compile_kernels(DTYPES[args.dtypes[0]])
+    else:
+        workers = [subprocess.Popen([sys.executable, "-m", "wise.effects.compile", name]) for name in args.dtypes]
+        if any(worker.wait() != 0 for worker in workers):
+            return 1
+    print(f"kernels compiled for {', '.join(args.dtypes)} in {time.perf_counter() - began:.1f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
