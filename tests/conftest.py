@@ -1,3 +1,4 @@
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -17,6 +18,9 @@ def pytest_sessionstart(session: pytest.Session) -> None:
     """With a cold cache (a fresh clone), the fused kernels are compiled for both dtypes before
     the tests, the two at once: that halves the compile time, and no timed test waits for a
     compilation."""
+    if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+        # started in the background by a shell without job control: the Ctrl-C tests need it back
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     if fused.requested() != "fused" or not fused.numba_available():
         return
     cache = Path(fused.__file__).parent / "__pycache__"
