@@ -564,13 +564,13 @@ def stylize_video(
 ) -> VideoResult:
     """Stylize the video ``source`` with ``look`` frame by frame into ``output`` (see the module).
 
-        ``codec`` is the video encoder (default: libx264 for .mp4, .mkv and .mov, libvpx-vp9 for
-        .webm), ``crf`` its constant quality (default 18 for x264, 32 for VP9; lower is better and
-        larger), ``quality_preset`` its speed preset (:data:`QUALITY_PRESETS`; by default x264's
-    medium, and ``fast`` for VP9). ``temporal_smoothing``
-        in [0, 1) is the weight of the previous frame's masks for a model that paints them (0: each
-        frame its own). Bad arguments raise :class:`WiseError` before any frame is rendered. Ctrl-C
-        returns a result with ``interrupted`` set and leaves no output file.
+    ``codec`` is the video encoder (default: libx264 for .mp4, .mkv and .mov, libvpx-vp9 for
+    .webm), ``crf`` its constant quality (default 18 for x264, 32 for VP9; lower is better and
+    larger), ``quality_preset`` its speed preset (:data:`QUALITY_PRESETS`; by default x264's
+    medium, and ``fast`` for VP9). ``temporal_smoothing`` in [0, 1) is the weight of the
+    previous frame's masks for a model that paints them (0: each frame its own). Bad arguments
+    raise :class:`WiseError` before any frame is rendered. Ctrl-C returns a result with
+    ``interrupted`` set and leaves no output file.
     """
     source, output = Path(source), Path(output)
     info = probe(source)
