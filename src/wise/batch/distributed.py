@@ -42,7 +42,7 @@ from typing import TYPE_CHECKING, Any, Callable, Iterator, Sequence
 
 from wise.batch.inputs import Job
 from wise.batch.look import Look, LookSpec
-from wise.batch.run import DONE, FAILED, SKIPPED, JsonLog, Outcome, Summary, is_complete, stylize_one
+from wise.batch.run import DONE, FAILED, JsonLog, Outcome, Summary, pending, stylize_one
 from wise.errors import WiseError
 from wise.interrupt import ctrl_c
 from wise.io import MAX_PIXELS_ENV
@@ -334,12 +334,7 @@ def run_on_ray(
         if log is not None:
             log.write(outcome)
 
-    todo: list[Job] = []
-    for job in jobs:
-        if not overwrite and is_complete(job):
-            finish(Outcome(str(job.source), str(job.output), SKIPPED))
-        else:
-            todo.append(job)
+    todo = pending(jobs, overwrite, finish)
     if todo:
         summary.interrupted = _run_pipeline(
             ray, spec, todo, finish, address=address, gpus_per_worker=gpus_per_worker, workers=workers,

@@ -13,7 +13,7 @@ import glob
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable, Iterator, Sequence
+from typing import Iterator, Sequence
 
 from wise.errors import WiseError
 from wise.io import IMAGE_SUFFIXES
@@ -143,11 +143,3 @@ def plan(inputs: Sequence[str], out: str | os.PathLike[str], fmt: str = "png", s
             by_output[output] = source
             jobs.append(Job(source, output, output.with_suffix(PARAMS_SUFFIX) if save_params else None))
     return jobs
-
-
-def outputs(jobs: Iterable[Job]) -> Iterator[Path]:
-    """Every file the jobs write."""
-    for job in jobs:
-        yield job.output
-        if job.params is not None:
-            yield job.params

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import torch
 
@@ -133,11 +132,6 @@ class Look:
             params = self.effect.default_params().unsqueeze(0)
         return _with_settings(params, self.settings)
 
-    @property
-    def keeps_size(self) -> bool:
-        """Whether results have the input's size (a translator's have its working size)."""
-        return self.predictor is None or not self.predictor.translates
-
     @torch.no_grad()
     def masks(self, image: torch.Tensor) -> torch.Tensor | None:
         """The masks a painting model predicts for ``image`` (settings applied); None otherwise."""
@@ -157,12 +151,3 @@ class Look:
             made = self.predictor.finish(image, params)
             return Rendered(made.result, made.masks)
         return Rendered(render(self.effect, image, params, device=self.device), params)
-
-
-def describe(spec: LookSpec) -> str:
-    """A short label of the look for progress lines, e.g. ``xdog (preset portrait)``."""
-    if spec.model:
-        return f"{spec.effect} (model {Path(spec.model).name if ':' not in spec.model else spec.model})"
-    if spec.params:
-        return f"{spec.effect} (parameters {Path(spec.params).name})"
-    return f"{spec.effect} (preset {spec.preset})" if spec.preset else spec.effect

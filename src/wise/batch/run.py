@@ -80,6 +80,18 @@ def is_complete(job: Job) -> bool:
     return job.output.is_file() and (job.params is None or job.params.is_file())
 
 
+def pending(jobs: Sequence[Job], overwrite: bool, skipped: Callable[[Outcome], None]) -> list[Job]:
+    """The jobs to render: all with ``overwrite``, else those whose files are not complete; each
+    job left out is passed to ``skipped``."""
+    todo: list[Job] = []
+    for job in jobs:
+        if not overwrite and is_complete(job):
+            skipped(Outcome(str(job.source), str(job.output), SKIPPED))
+        else:
+            todo.append(job)
+    return todo
+
+
 def write(job: Job, rendered: Rendered, look: Look, quality: int) -> None:
     """The job's files, each atomically; the parameter file first, so that an image that
     exists always has its parameters."""
@@ -161,22 +173,17 @@ def run_jobs(
         if report is not None and outcome.status == FAILED:
             report(outcome)
 
-    todo: list[Job] = []
-    for job in jobs:
-        if not overwrite and is_complete(job):
-            finish(Outcome(str(job.source), str(job.output), SKIPPED))
-        else:
-            todo.append(job)
+    todo = pending(jobs, overwrite, finish)
     bar = _progress(len(todo), progress)
     pool = ThreadPoolExecutor(max_workers=max(1, workers), thread_name_prefix="wise-batch")
     reads: deque[tuple[Job, Future, float]] = deque()
     writes: deque[tuple[Job, Future, float]] = deque()
     ahead = max(1, workers)
-    pending = iter(todo)
+    queued = iter(todo)
 
     def read_more() -> None:
         while len(reads) < ahead:
-            job = next(pending, None)
+            job = next(queued, None)
             if job is None:
                 return
             reads.append((job, pool.submit(read_image, job.source), time.perf_counter()))
