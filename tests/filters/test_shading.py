@@ -34,9 +34,11 @@ def test_flat_height_gives_ambient_diffuse_and_specular() -> None:
     assert torch.allclose(out, expected)
 
 
-def test_defaults_keep_flat_colour() -> None:
+@pytest.mark.parametrize("light", [(-1.0, -1.0, 1.0), (0.0, -1.0, 1.5), (2.0, 0.5, 0.3)])
+@pytest.mark.parametrize("ambient", [0.5, 0.2])
+def test_default_diffuse_keeps_flat_colour_under_any_light(light: tuple[float, float, float], ambient: float) -> None:
     color = torch.rand(1, 3, 5, 5, dtype=DOUBLE) * 0.9
-    out = bump_phong(color, torch.zeros(1, 1, 5, 5, dtype=DOUBLE), specular=0.0)
+    out = bump_phong(color, torch.zeros(1, 1, 5, 5, dtype=DOUBLE), 3.0, light, ambient, specular=0.0)
     assert torch.allclose(out, color)
 
 

@@ -63,16 +63,22 @@ MAX_STROKE_STEPS = 20
 reference pixels) is sampled every bristle cell, so no stroke breaks into dashes."""
 MAX_EDGE_STEPS = 6
 """Most samples per side of the edge-enhancing LoG."""
-RELIEF_FLOOR = 0.45
+RELIEF_FLOOR = 0.15
 """Share of the relief left where the paint does not vary (skin, sky): soft, still visible strokes."""
-RELIEF_VARIATION = 0.03
+STROKE_FLOOR = 0.5
+"""Share of the stroke length left where the paint does not vary: short dabs on skin and sky
+rather than long grooves that run across a face like wood grain."""
+RELIEF_VARIATION = 0.05
 """Local deviation of the paint's lightness (L* / 100) at which the relief is halfway to full."""
 VARIATION_SIGMA = 4.0
 """Window of that deviation (reference pixels)."""
-CAVITY_SHADE = 0.25
+CAVITY_SHADE = 0.2
 """Darkening of the grooves and lightening of the ridges per unit of paint height and relief:
 paint catches ambient light by its height, so strokes of every direction show, also those
 running towards the light."""
+RIDGE_HEIGHT = 0.25
+"""Paint height (``tanh`` of it) above which a stroke's ridge can catch a highlight: the top few
+per cent of the bristle relief, so highlights stay small and sparse."""
 LIGHT_DIRECTION = (0.0, -1.0, 1.5)
 """Light from above, in front of the canvas: no side is preferred, so a mirrored picture is lit
 as the mirror of the picture."""
@@ -120,7 +126,7 @@ class OilPaint(Effect):
             "details": 1.2,
             "stroke_length": 6.0,
             "brush_size": 0.8,
-            "relief": 1.4,
+            "relief": 1.8,
             "specular": 0.35,
             "shininess": 14.0,
             "edge_enhancement": 0.6,
@@ -164,7 +170,9 @@ class OilPaint(Effect):
         abstraction_reach = ABSTRACTION_FACTOR * (2 * 2 * 2 * self.kernel_size * math.sqrt(2.0) + 4)
         edge_reach = SUPPORT * 2 * EDGE_SIGMA * scale
         variation_reach = SUPPORT * VARIATION_SIGMA * scale
-        return math.ceil(max(texture_reach, abstraction_reach + variation_reach, edge_reach)) + 4
+        # the grooves across the strokes read strokes whose length follows the paint's variation there
+        groove_reach = SUPPORT * brush_spec.max * scale + abstraction_reach + variation_reach
+        return math.ceil(max(texture_reach, groove_reach, edge_reach)) + 4
 
     @staticmethod
     def _flow_reach(scale: float) -> float:
@@ -225,16 +233,22 @@ class OilPaint(Effect):
         abstracted = self.stage(joint_bilateral_upsample, low_abstracted, lab, 1.0, UPSAMPLING_RANGE)
         colours = self.recomputed(lab_to_rgb, abstracted)
 
-        height = self.paint_height(tangent, p["stroke_length"], p["brush_size"], ctx)
         variation = self.stage(local_deviation, abstracted[:, :1] / LUMINANCE_RANGE, VARIATION_SIGMA, scale)
-        relief = p["relief"] * (RELIEF_FLOOR + (1.0 - RELIEF_FLOOR) * variation / (variation + RELIEF_VARIATION))
+        structured = variation / (variation + RELIEF_VARIATION)  # 0 on even paint, towards 1 where it varies
+        stroke_length = p["stroke_length"] * (STROKE_FLOOR + (1.0 - STROKE_FLOOR) * structured)
+        height = self.paint_height(tangent, stroke_length, p["brush_size"], ctx)
+        relief = p["relief"] * (RELIEF_FLOOR + (1.0 - RELIEF_FLOOR) * structured)
+        ridges = (torch.tanh(height) - RIDGE_HEIGHT).clamp_min(0.0) / (1.0 - RIDGE_HEIGHT)
+        # a highlight adds the same to every channel, at most the paint's headroom below white:
+        # the hue is kept and no channel clips (bright skin is not washed out)
+        headroom = 1.0 - colours.amax(dim=1, keepdim=True)
         lit = self.stage(
             bump_phong,
             colours,
             height,
             relief,
             LIGHT_DIRECTION,
-            specular=p["specular"],
+            specular=p["specular"] * ridges * headroom,
             shininess=p["shininess"],
             scale=scale,
         )

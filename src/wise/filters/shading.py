@@ -12,10 +12,7 @@ from wise.filters._checks import ParamLike, as_map, check_image, resolution_scal
 
 DEFAULT_LIGHT_DIRECTION = (-1.0, -1.0, 1.0)
 """Towards the light, in (x right, y down, z towards the viewer): from the top left."""
-_DEFAULT_LIGHT_Z = DEFAULT_LIGHT_DIRECTION[2] / math.sqrt(sum(c * c for c in DEFAULT_LIGHT_DIRECTION))
 DEFAULT_AMBIENT = 0.5
-DEFAULT_DIFFUSE = (1.0 - DEFAULT_AMBIENT) / _DEFAULT_LIGHT_Z
-"""With the default ambient and light, a flat area keeps its colour (ambient + diffuse L.z = 1)."""
 DEFAULT_SPECULAR = 0.2
 DEFAULT_SHININESS = 16.0
 POW_FLOOR = 1e-8
@@ -55,7 +52,7 @@ def bump_phong(
     strength: ParamLike = 1.0,
     light_direction: tuple[float, float, float] = DEFAULT_LIGHT_DIRECTION,
     ambient: ParamLike = DEFAULT_AMBIENT,
-    diffuse: ParamLike = DEFAULT_DIFFUSE,
+    diffuse: ParamLike | None = None,
     specular: ParamLike = DEFAULT_SPECULAR,
     shininess: ParamLike = DEFAULT_SHININESS,
     scale: float | None = None,
@@ -76,8 +73,8 @@ def bump_phong(
         height: ``(B, 1, H, W)`` height map (in units of colour values; a batch of 1
             broadcasts).
         strength, ambient, diffuse, specular, shininess: floats, ``(B,)`` tensors or
-            ``(B, 1, H, W)`` maps; all differentiable. The defaults keep the colour of a
-            flat area under the default light.
+            ``(B, 1, H, W)`` maps; all differentiable. ``diffuse`` defaults to
+            ``(1 - ambient) / L_z``, which keeps the colour of a flat area under any light.
         light_direction: fixed (x, y, z) towards the light, x right, y down (image rows),
             z towards the viewer; need not be unit length. Default: from the top left.
         scale: pixels per reference pixel; defaults to ``min(H, W) / 512``.
@@ -92,7 +89,9 @@ def bump_phong(
     light_x, light_y, light_z = _unit_light(light_direction)
     pixels_per_reference = resolution_scale(color) if scale is None else scale
     strength_map = as_map(strength, color, "strength")
-    maps = [as_map(v, color, name) for v, name in ((ambient, "ambient"), (diffuse, "diffuse"), (specular, "specular"))]
+    ambient_map = as_map(ambient, color, "ambient")
+    diffuse_map = (1.0 - ambient_map) / light_z if diffuse is None else as_map(diffuse, color, "diffuse")
+    maps = [ambient_map, diffuse_map, as_map(specular, color, "specular")]
     shininess_map = as_map(shininess, color, "shininess")
     if fused.enabled(color, height, strength_map, shininess_map, *maps):
         from wise.filters.fused.shading import BumpPhong
