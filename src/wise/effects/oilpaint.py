@@ -132,7 +132,7 @@ class OilPaint(Effect):
             "edge_enhancement": 0.6,
         },
         "glaze": {
-            "brightness": 0.05,
+            "brightness": 0.02,
             "contrast": 1.0,
             "saturation": 1.1,
             "details": 2.0,

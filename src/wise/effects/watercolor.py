@@ -24,6 +24,7 @@ from wise.filters.noise import paper_texture, value_noise
 from wise.filters.upsample import downsample, joint_bilateral_upsample
 from wise.filters.watercolor import (
     edge_darkening,
+    feature_accents,
     flat_washes,
     gaps_overlaps,
     paper_shading,
@@ -52,6 +53,11 @@ CONTOUR_DETAILS = 2.0
 CONTOUR_STROKE = 0.5
 CONTOUR_STRENGTH = 1.0
 CONTOUR_THRESHOLD = 0.25
+FEATURE_ACCENT = 1.0
+"""How much of their darkness the features (eyes, brows, nostrils, lips) lost to the washes is
+put back as darker strokes: a watercolourist leaves them defined."""
+ACCENT_SURROUNDINGS = 5.0
+"""Size of a feature's surroundings for the accents (reference pixels): an eye, a nostril."""
 RIM_THRESHOLD = 0.03
 """Colour difference to the blurred washes below which no dark rim forms: small, faint
 features (pores, nostrils, soft shading) stay without one, boundaries between washes get it."""
@@ -115,14 +121,14 @@ class Watercolor(Effect):
     )
     presets = {
         "wet": {
-            "brightness": 0.12,
-            "contrast": 0.85,
+            "brightness": 0.06,
+            "contrast": 1.0,
             "saturation": 1.25,
             "abstraction": 7.0,
             "flatness": 0.7,
             "bleeding": 6.0,
-            "wobble": 1.2,
-            "edge_darkening": 2.0,
+            "wobble": 0.5,
+            "edge_darkening": 1.2,
             "turbulence": 0.2,
             "dispersion": 0.05,
             "granulation": 0.2,
@@ -131,7 +137,7 @@ class Watercolor(Effect):
             "contour": 0.0,
         },
         "dry": {
-            "brightness": 0.12,
+            "brightness": 0.08,
             "contrast": 1.0,
             "saturation": 1.1,
             "abstraction": 4.0,
@@ -147,8 +153,8 @@ class Watercolor(Effect):
             "contour": 0.15,
         },
         "pale": {
-            "brightness": 0.2,
-            "contrast": 0.75,
+            "brightness": 0.08,
+            "contrast": 0.95,
             "saturation": 1.3,
             "abstraction": 8.0,
             "flatness": 1.0,
@@ -174,7 +180,8 @@ class Watercolor(Effect):
         bleeding_reach = 1.5 * self.spec("bleeding").max
         texture_reach = WOBBLE_GAIN * self.spec("wobble").max / 4.0 + 4.0
         contour_reach = SUPPORT * float(detail_sigmas(torch.tensor(CONTOUR_DETAILS))["edge_smoothing"])
-        reach = flow_reach + max(abstraction_reach + bleeding_reach + texture_reach, contour_reach)
+        accent_reach = SUPPORT * ACCENT_SURROUNDINGS  # the accents read the finished washes around a pixel
+        reach = flow_reach + max(abstraction_reach + bleeding_reach + texture_reach + accent_reach, contour_reach)
         return math.ceil(reach * scale + math.sqrt(2.0) * 2 * (self.kernel_size + 2)) + 4
 
     def _washes(
@@ -244,7 +251,8 @@ class Watercolor(Effect):
         )
         pigmented = self.recomputed(pigment_density, darkened, density)
         overlapped = self.stage(gaps_overlaps, pigmented, edges, across, p["gaps_overlaps"], dispersion_noise, scale)
-        finished = self.recomputed(paper_shading, overlapped, paper, p["paper"])
+        shaded = self.recomputed(paper_shading, overlapped, paper, p["paper"])
+        finished = self.stage(feature_accents, shaded, image, FEATURE_ACCENT, ACCENT_SURROUNDINGS, scale=scale)
 
         if not torch.is_grad_enabled() and float(p["contour"].max()) <= 0.0:
             return finished.clamp(0.0, 1.0)  # invisible contours: skip their cost when rendering

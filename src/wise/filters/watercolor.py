@@ -359,3 +359,50 @@ def paper_shading(image: torch.Tensor, paper: torch.Tensor, amount: ParamLike) -
     check_image(image)
     _check_map(paper, image, "paper")
     return image * (1.0 - PAPER_SHADE * as_map(amount, image, "amount") * (1.0 - paper))
+
+
+def feature_accents(
+    washes: torch.Tensor,
+    photo: torch.Tensor,
+    strength: ParamLike = 1.0,
+    sigma: float = 3.0,
+    threshold: float = 0.04,
+    knee: float = 0.08,
+    scale: float | None = None,
+) -> torch.Tensor:
+    """Put back, as darker strokes of the wash's own colour, the small dark features that the
+    washes lost (eyes, brows, nostrils, the line of the lips).
+
+    With ``y`` the mean of the channels and ``G`` a Gaussian of ``sigma``, the photo's local
+    darkness ``y_photo / G(y_photo)`` is laid onto the washes' local tone: the target lightness is
+    ``G(y_washes) * y_photo / G(y_photo)``. Where the washes are lighter than that target by more
+    than ``threshold`` (rising smoothly to full at ``threshold + knee``) they are glazed down
+    towards it: ``washes * (target / y_washes) ** (strength * w)``. The global tone of the washes
+    (a pale preset) is kept, a large dark area (hair) is left as it is, and no wash is glazed
+    below its target. Hue is kept: all channels scale alike.
+
+    Args:
+        washes: ``(B, 3, H, W)`` in [0, 1].
+        photo: ``(B, 3, H, W)`` in [0, 1], the picture the washes abstract.
+        strength: float, ``(B,)`` or ``(B, 1, H, W)``: 0 leaves the washes, 1 glazes them to the target.
+        sigma: size of a feature's surroundings (pixels of a 512-pixel short side).
+        threshold, knee: lightness loss (0–1) where the glaze starts, and the width of its rise.
+        scale: pixels per reference pixel (default ``min(H, W) / 512``).
+
+    Returns:
+        ``(B, 3, H, W)``.
+    """
+    check_image(washes, "washes", channels=3)
+    check_image(photo, "photo", channels=3)
+    if photo.shape[-2:] != washes.shape[-2:] or photo.shape[0] not in (1, washes.shape[0]):
+        raise WiseError(f"photo {tuple(photo.shape)} must match washes {tuple(washes.shape)}")
+    s = _scale(washes, scale)
+    weight_map = as_map(strength, washes, "strength")
+    wash_light = washes.mean(dim=1, keepdim=True).clamp_min(1e-3)
+    photo_light = photo.mean(dim=1, keepdim=True).clamp_min(1e-3)
+    surroundings = gaussian_blur(torch.cat((photo_light.expand_as(wash_light), wash_light), dim=1), sigma, scale=s)
+    target = surroundings[:, 1:2] * photo_light / surroundings[:, 0:1]
+    ramp = ((wash_light - target - threshold) / knee).clamp(0.0, 1.0)
+    weight = ramp * ramp * (3.0 - 2.0 * ramp)  # smoothstep
+    ratio = (target / wash_light).clamp(1e-3, 1.0)
+    return washes * ratio.pow(weight_map * weight)
