@@ -12,6 +12,7 @@ from PIL import Image, ImageDraw, ImageFont
 
 from wise import effects
 from wise.io import tensor_to_image
+from wise.render import render
 
 LABEL_HEIGHT = 28
 MARGIN = 8
@@ -54,8 +55,7 @@ def make_sheet(
         row = []
         for preset in effect.presets:
             start = time.perf_counter()
-            with torch.no_grad():
-                result = effect(photo.to(device), effect.preset(preset)[None].to(device)).cpu()
+            result = render(effect, photo, effect.preset(preset)[None], device=device)
             if progress is not None:
                 progress(name, preset, time.perf_counter() - start)
             row.append((f"{name} / {preset}", tensor_to_image(result)))

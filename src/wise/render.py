@@ -1,14 +1,20 @@
-"""Rendering large images without autograd, tile by tile.
+"""Rendering without autograd: large images tile by tile, small ones at the reference scale.
 
 A tile is rendered with a halo of the pixels its pipeline reads around it, with the scale and
 position of the whole picture, and only its core is kept, so the tiles join without seams.
 Parameter masks are resampled for each tile from the mask itself, exactly as
 :func:`wise.params.resize_masks` would resample them for the whole picture, without ever
 building full-resolution masks.
+
+A picture whose short side is below the reference (512 pixels) is enlarged to it, rendered and
+reduced again: its look is the reference render's reduced to the picture, where a render at the
+picture's own size would shrink every structure scale of the effects under a pixel (lines break
+into dashes, brush strokes vanish).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Iterator
 
@@ -16,11 +22,14 @@ import torch
 import torch.nn.functional as F
 
 from wise.effects.base import Effect
+from wise.filters import gaussian_blur
 from wise.filters._checks import REFERENCE_SHORT_SIDE
 from wise.params import check_params
 
 MAX_SPLITS = 64
 """Most tiles along one side considered when choosing the tile layout."""
+ENLARGEMENT_SHARPENING = 0.5
+"""Sigma of the unsharp mask after enlarging a small picture, per unit of enlargement."""
 TILE_ALIGNMENT = 8
 """Tiles and halos start on multiples of this, so stages that work at a reduced resolution
 see the same pixel grid in every tile."""
@@ -89,6 +98,24 @@ def masks_for_box(masks: torch.Tensor, size: tuple[int, int], box: tuple[int, in
     return F.grid_sample(masks, grid, mode="bilinear", padding_mode="border", align_corners=False)
 
 
+def enlarged(image: torch.Tensor) -> torch.Tensor:
+    """``image`` (B, C, H, W) enlarged so that its short side is the reference's: bicubic, then
+    sharpened by an unsharp mask of the enlargement's own scale, which gives back the edge contrast
+    that the interpolation spreads (an XDoG of the bare enlargement draws a third fewer lines)."""
+    height, width = image.shape[-2:]
+    factor = REFERENCE_SHORT_SIDE / min(height, width)
+    shortest = math.ceil(REFERENCE_SHORT_SIDE)
+    size = (max(shortest, round(height * factor)), max(shortest, round(width * factor)))
+    smooth = F.interpolate(image, size=size, mode="bicubic", align_corners=False)
+    detail = smooth - gaussian_blur(smooth, ENLARGEMENT_SHARPENING * factor, scale=1.0)
+    return (smooth + detail).clamp(0.0, 1.0)
+
+
+def reduced(image: torch.Tensor, size: tuple[int, int]) -> torch.Tensor:
+    """``image`` (B, C, H, W) reduced to ``size`` with an antialiasing filter."""
+    return F.interpolate(image, size=size, mode="bilinear", antialias=True, align_corners=False).clamp(0.0, 1.0)
+
+
 @torch.no_grad()
 def render(
     effect: Effect,
@@ -97,7 +124,8 @@ def render(
     tile: int | None = None,
     device: torch.device | str | None = None,
 ) -> torch.Tensor:
-    """Render ``effect`` on ``image`` (B, 3, H, W) without autograd, in tiles when it is large.
+    """Render ``effect`` on ``image`` (B, 3, H, W) without autograd, in tiles when it is large,
+    at the reference scale and reduced when it is small (see the module).
 
     ``tile`` forces square cores of that size; by default the layout processes the fewest
     pixels with no padded tile above the effect's ``tile_pixels``. Memory stays that of one padded
@@ -107,6 +135,8 @@ def render(
     device = torch.device(device) if device is not None else image.device
     batch, _, height, width = image.shape
     params = check_params(params, effect.param_specs, batch)
+    if min(height, width) < REFERENCE_SHORT_SIDE:
+        return reduced(render(effect, enlarged(image), params, tile, device), (height, width))
     scale = min(height, width) / REFERENCE_SHORT_SIDE
     if (tile is None and height * width <= effect.tile_pixels) or (tile is not None and max(height, width) <= tile):
         return effect(image.to(device), params.to(device), scale=scale).to(image.device)
@@ -189,7 +219,8 @@ def rerender(
     whole render up to floating-point rounding, like a render in tiles.
     """
     height, width = image.shape[-2:]
-    if params.dim() != 4 or params.shape != before.shape or height * width > effect.tile_pixels:
+    small = min(height, width) < REFERENCE_SHORT_SIDE  # rendered enlarged: a whole render is cheap
+    if small or params.dim() != 4 or params.shape != before.shape or height * width > effect.tile_pixels:
         return render(effect, image, params)
     box = changed_box(params, before, (height, width))
     if box is None:
