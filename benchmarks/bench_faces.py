@@ -29,11 +29,11 @@ from pathlib import Path
 import numpy as np
 import torch
 from PIL import Image
-from skimage import color, data
-from skimage.filters import gaussian
+from skimage import data
 
 import wise
 from wise.io import image_to_tensor, read_image, tensor_to_image
+from wise.metrics import face_measures
 from wise.render import render
 
 FACES = {
@@ -41,32 +41,6 @@ FACES = {
     "portrait": (300, 650, 250, 580),
 }
 """(top, bottom, left, right) of the face in the photo's own pixels."""
-BLOWN_LIGHTNESS = 95.0
-LIT_PHOTO_LIGHTNESS = 88.0
-FEATURE_SHARE = 0.05
-FEATURE_BLUR = 1.0
-
-
-def lightness(image: np.ndarray) -> np.ndarray:
-    """CIE L* of an (H, W, 3) uint8 or [0, 1] float picture."""
-    if image.dtype == np.uint8:
-        image = image.astype(np.float64) / 255.0
-    return color.rgb2lab(image)[..., 0]
-
-
-def face_measures(render_rgb: np.ndarray, photo_rgb: np.ndarray, box: tuple[int, int, int, int]) -> dict[str, float]:
-    """Blown share, mean L* shift and feature contrast of ``render_rgb`` against ``photo_rgb`` on ``box``."""
-    top, bottom, left, right = box
-    photo_l, render_l = lightness(photo_rgb), lightness(render_rgb)
-    face_photo, face_render = photo_l[top:bottom, left:right], render_l[top:bottom, left:right]
-    blown = float(((face_render > BLOWN_LIGHTNESS) & (face_photo < LIT_PHOTO_LIGHTNESS)).mean())
-    shift = float(face_render.mean() - face_photo.mean())
-    blurred_photo = gaussian(photo_l, FEATURE_BLUR, preserve_range=True)[top:bottom, left:right]
-    blurred_render = gaussian(render_l, FEATURE_BLUR, preserve_range=True)[top:bottom, left:right]
-    features = blurred_photo <= np.quantile(blurred_photo, FEATURE_SHARE)
-    photo_contrast = np.median(blurred_photo) - blurred_photo[features].mean()
-    render_contrast = np.median(blurred_render) - blurred_render[features].mean()
-    return {"blown": blown, "shift": shift, "contrast": float(render_contrast / photo_contrast)}
 
 
 def render_preset(effect: wise.effects.Effect, photo: torch.Tensor, preset: str) -> np.ndarray:

@@ -3,8 +3,10 @@ import torch
 import torch.nn.functional as F
 
 import wise
+from wise.effects import create
+from wise.metrics import ssim
 from wise.params import resize_masks
-from wise.render import masks_for_box, render, tile_shape, tiles
+from wise.render import masks_for_box, render, rerender, tile_shape, tiles
 
 
 def test_tiles_cover_the_picture_once() -> None:
@@ -45,7 +47,7 @@ def test_tiled_rendering_has_no_seams(name: str, local: bool, astronaut: torch.T
         params = params[:, :, None, None] + 0.3 * (torch.rand(1, params.shape[1], 12, 9) - 0.5)
     with torch.no_grad():
         whole = effect(image, params)
-    tiled = render(effect, image, params, tile=80)
+    tiled = render(effect, image, params, tile=80, at_reference=False)
     difference = (tiled - whole).abs()
     # identical up to rounding; a hard threshold may flip an isolated pixel
     assert difference.mean() < 1e-3
@@ -85,16 +87,49 @@ def test_rerendering_a_painted_region_equals_a_whole_render(name: str, astronaut
     after = before.clone()
     after[0, 0, 60:70, 20:34] += 0.3  # a stroke on the first parameter
     with torch.no_grad():
-        rendered = render(effect, image, before)
-        whole = render(effect, image, after)
+        rendered = render(effect, image, before, at_reference=False)
+        whole = render(effect, image, after, at_reference=False)
     sizes = []
     original = effect.forward
     effect.forward = lambda crop, *a, **k: sizes.append(crop.shape[-2:]) or original(crop, *a, **k)
-    updated = rerender(effect, image, after, before, rendered)
+    updated = rerender(effect, image, after, before, rendered, at_reference=False)
     difference = (updated - whole).abs()
     assert difference.mean() < 1e-4
     assert (difference > 0.05).float().mean() < 1e-3
     assert len(sizes) == 1
     if not effect.guide_channels:  # oil paint's flow reaches across this small picture: it is drawn whole
         assert sizes[0][0] * sizes[0][1] < 0.5 * 256 * 320  # only a crop was rendered
-    assert torch.equal(rerender(effect, image, after, after, updated), updated)  # nothing changed: nothing drawn
+    assert torch.equal(rerender(effect, image, after, after, updated, at_reference=False), updated)  # nothing drawn
+
+
+def test_a_small_picture_looks_like_the_reference_render_reduced(astronaut: torch.Tensor) -> None:
+    """Below the reference size every structure scale would fall under a pixel (a sketch of a few
+    dashes); a small picture is rendered at the reference scale and reduced instead."""
+    effect = create("xdog").eval()
+    params = effect.preset("sketch")[None]
+    small = F.interpolate(astronaut, size=(256, 256), mode="bilinear", antialias=True)
+    reference = F.interpolate(render(effect, astronaut, params), size=(256, 256), mode="bilinear", antialias=True)
+    rendered = render(effect, small, params)
+    assert rendered.shape == small.shape
+    ink, reference_ink = float((rendered < 0.5).float().mean()), float((reference < 0.5).float().mean())
+    assert ink >= 0.6 * reference_ink
+    assert ssim(rendered, reference) >= 0.6
+    with torch.no_grad():
+        own_scale = effect(small, params)
+    assert float((own_scale < 0.5).float().mean()) < 0.6 * reference_ink  # what the enlargement avoids
+
+
+def test_a_picture_at_the_reference_size_renders_at_its_own_scale(astronaut: torch.Tensor) -> None:
+    effect = create("cartoon").eval()
+    params = effect.preset("classic")[None]
+    with torch.no_grad():
+        assert torch.equal(render(effect, astronaut, params), effect(astronaut, params))
+
+
+def test_rerendering_a_small_picture_equals_its_render(astronaut_small: torch.Tensor) -> None:
+    effect = create("cartoon").eval()
+    before = effect.preset("classic")[None, :, None, None].expand(1, -1, 8, 8).clone()
+    after = before.clone()
+    after[..., 2:4, 2:4] = 0.9
+    drawn = render(effect, astronaut_small, before)
+    assert torch.equal(rerender(effect, astronaut_small, after, before, drawn), render(effect, astronaut_small, after))

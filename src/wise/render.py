@@ -123,9 +123,11 @@ def render(
     params: torch.Tensor,
     tile: int | None = None,
     device: torch.device | str | None = None,
+    at_reference: bool = True,
 ) -> torch.Tensor:
     """Render ``effect`` on ``image`` (B, 3, H, W) without autograd, in tiles when it is large,
-    at the reference scale and reduced when it is small (see the module).
+    at the reference scale and reduced when it is small (see the module; ``at_reference=False``
+    renders a small picture at its own scale, as ``effect(image, params)`` does).
 
     ``tile`` forces square cores of that size; by default the layout processes the fewest
     pixels with no padded tile above the effect's ``tile_pixels``. Memory stays that of one padded
@@ -135,7 +137,7 @@ def render(
     device = torch.device(device) if device is not None else image.device
     batch, _, height, width = image.shape
     params = check_params(params, effect.param_specs, batch)
-    if min(height, width) < REFERENCE_SHORT_SIDE:
+    if at_reference and min(height, width) < REFERENCE_SHORT_SIDE:
         return reduced(render(effect, enlarged(image), params, tile, device), (height, width))
     scale = min(height, width) / REFERENCE_SHORT_SIDE
     if (tile is None and height * width <= effect.tile_pixels) or (tile is not None and max(height, width) <= tile):
@@ -209,19 +211,25 @@ REDRAW_FRACTION = 0.5
 
 @torch.no_grad()
 def rerender(
-    effect: Effect, image: torch.Tensor, params: torch.Tensor, before: torch.Tensor, rendered: torch.Tensor
+    effect: Effect,
+    image: torch.Tensor,
+    params: torch.Tensor,
+    before: torch.Tensor,
+    rendered: torch.Tensor,
+    at_reference: bool = True,
 ) -> torch.Tensor:
     """``render(effect, image, params)`` given ``rendered``, the render with the masks ``before``:
     only the pixels that the changed part of the masks can reach are rendered again, from a crop
     with the pixels the pipeline reads around them (a painted stroke costs a fraction of a render).
 
     ``params`` and ``before`` are masks ``(B, P, h, w)`` of the same shape; the result equals a
-    whole render up to floating-point rounding, like a render in tiles.
+    whole render up to floating-point rounding, like a render in tiles. A picture below the
+    reference size is rendered whole (see :func:`render`).
     """
     height, width = image.shape[-2:]
-    small = min(height, width) < REFERENCE_SHORT_SIDE  # rendered enlarged: a whole render is cheap
+    small = at_reference and min(height, width) < REFERENCE_SHORT_SIDE  # enlarged: a whole render is cheap
     if small or params.dim() != 4 or params.shape != before.shape or height * width > effect.tile_pixels:
-        return render(effect, image, params)
+        return render(effect, image, params, at_reference=at_reference)
     box = changed_box(params, before, (height, width))
     if box is None:
         return rendered.clone()
@@ -244,7 +252,7 @@ def rerender(
         min(width, x1 + reach),
     )
     if (crop.py1 - crop.py0) * (crop.px1 - crop.px0) > REDRAW_FRACTION * height * width:
-        return render(effect, image, params)
+        return render(effect, image, params, at_reference=at_reference)
     masks = check_params(params, effect.param_specs, image.shape[0])
     result = effect(
         image[..., crop.py0 : crop.py1, crop.px0 : crop.px1],

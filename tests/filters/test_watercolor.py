@@ -6,7 +6,14 @@ from torch.autograd import gradcheck
 
 from tests.filters.helpers import rand, unit, unit_field
 from wise.errors import WiseError
-from wise.filters.watercolor import edge_darkening, gaps_overlaps, pigment_density, wet_in_wet, wobble
+from wise.filters.watercolor import (
+    edge_darkening,
+    feature_accents,
+    gaps_overlaps,
+    pigment_density,
+    wet_in_wet,
+    wobble,
+)
 
 
 @pytest.fixture(autouse=True, scope="module")
@@ -224,3 +231,33 @@ def test_edge_darkening_is_resolution_independent() -> None:
     darkest_small = float((edge_darkening(small, 2.0, sigma=2.0, scale=1.0) - small).min())
     darkest_large = float((edge_darkening(large, 2.0, sigma=2.0, scale=2.0) - large).min())
     assert darkest_large == pytest.approx(darkest_small, rel=0.15)
+
+
+def test_feature_accents_give_back_a_small_dark_feature_the_washes_lost() -> None:
+    photo = torch.full((1, 3, 64, 64), 0.7)
+    photo[..., 30:34, 30:34] = 0.1  # an eye
+    washes = torch.full_like(photo, 0.75)  # the eye wiped out, the tone lifted a little
+    out = feature_accents(washes, photo, 1.0, scale=1.0)
+    assert out[0, 0, 31, 31] < 0.3  # the feature is dark again
+    assert torch.allclose(out[..., :16, :16], washes[..., :16, :16])  # the lifted tone is kept
+    assert torch.equal(feature_accents(washes, photo, 0.0, scale=1.0), washes)
+
+
+def test_feature_accents_leave_a_large_dark_area_and_the_hue() -> None:
+    photo = torch.full((1, 3, 64, 64), 0.8)
+    photo[..., :, :32] = 0.1  # hair beside skin
+    washes = photo * torch.tensor([1.0, 0.8, 0.6]).view(1, 3, 1, 1)
+    out = feature_accents(washes, photo, 1.0, scale=1.0)
+    assert torch.allclose(out, washes, atol=1e-6)
+    tinted = torch.full_like(photo, 0.7) * torch.tensor([1.0, 0.8, 0.6]).view(1, 3, 1, 1)
+    dot = torch.full_like(photo, 0.7)
+    dot[..., 30:34, 30:34] = 0.1
+    accented = feature_accents(tinted, dot, 1.0, scale=1.0)[0, :, 31, 31]
+    assert torch.allclose(accented / accented[0], torch.tensor([1.0, 0.8, 0.6]), atol=1e-5)
+
+
+def test_feature_accents_gradcheck() -> None:
+    photo = torch.rand(1, 3, 12, 12, dtype=torch.float64) * 0.5
+    washes = (torch.rand(1, 3, 12, 12, dtype=torch.float64) * 0.3 + 0.6).requires_grad_()
+    strength = torch.full((1, 1, 12, 12), 0.7, dtype=torch.float64, requires_grad=True)
+    assert torch.autograd.gradcheck(lambda w, s: feature_accents(w, photo, s, scale=1.0), (washes, strength))
