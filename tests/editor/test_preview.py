@@ -27,7 +27,8 @@ def _decode(content: bytes) -> np.ndarray:
 def test_a_stroke_redraws_part_of_the_preview_and_matches_a_whole_one(
     effect: str, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    photo = _png(np.asarray(Image.fromarray(data.astronaut()).resize((320, 256), Image.BICUBIC)))
+    # at the reference size: a smaller preview is rendered whole, at the reference scale
+    photo = _png(np.asarray(Image.fromarray(data.astronaut()).resize((640, 512), Image.BICUBIC)))
     session = EditorSession()
     session.choose_effect(effect)
     session.open_image(photo, "astronaut.png")
@@ -52,4 +53,4 @@ def test_a_stroke_redraws_part_of_the_preview_and_matches_a_whole_one(
     whole = _decode(fresh.render_preview(fresh.snapshot()))
     difference = np.abs(updated - whole)
     assert difference.mean() < 0.05 and (difference > 12).mean() < 1e-3
-    assert len(drawn_sizes) == 1 and 0 < drawn_sizes[0] < 0.5 * 256 * 320
+    assert len(drawn_sizes) == 1 and 0 < drawn_sizes[0] < 0.5 * 512 * 640
