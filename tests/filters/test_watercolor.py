@@ -261,3 +261,13 @@ def test_feature_accents_gradcheck() -> None:
     washes = (torch.rand(1, 3, 12, 12, dtype=torch.float64) * 0.3 + 0.6).requires_grad_()
     strength = torch.full((1, 1, 12, 12), 0.7, dtype=torch.float64, requires_grad=True)
     assert torch.autograd.gradcheck(lambda w, s: feature_accents(w, photo, s, scale=1.0), (washes, strength))
+
+
+def test_a_strong_rim_darkens_to_at_most_the_colour_squared() -> None:
+    """Pigment pools into a darker rim, never into black specks (a density beyond 2 turns
+    colours negative, clipped to black)."""
+    image = torch.full((1, 3, 32, 32), 0.55)
+    image[..., :, :16] = 0.08  # dark hair beside skin
+    out = edge_darkening(image, 3.0, scale=1.0)
+    assert bool((out >= image * image - 1e-6).all())
+    assert float(out[0, 0, 16, 16]) < 0.45  # still a visible rim on the skin's side

@@ -31,6 +31,8 @@ EDGE_SIGMA = 2.0
 EDGE_GAIN = 8.0
 """Edge strength per unit of colour difference to the blurred image: a step of 0.3 between two
 washes gives a strength of about 1.2 at the boundary."""
+RIM_DENSITY = 1.0
+"""Most extra pigment density of a rim (d - 1): the rim darkens a colour C to C^2 at most."""
 RIM_KNEE = 0.01
 """Width of the soft knee at the rim threshold: below it the rim fades out smoothly, so the
 darkening keeps a gradient for optimization."""
@@ -116,7 +118,10 @@ def edge_darkening(
     ``e = EDGE_GAIN * k * softplus((m - threshold) / k)`` (``k`` = :data:`RIM_KNEE`), a soft
     ``max(m - threshold, 0)`` that leaves small, faint features without a rim and keeps a
     gradient below the threshold.
-    The colour is darkened with :func:`pigment_density` at density ``d = 1 + amount * e``.
+    The colour is darkened with :func:`pigment_density` at density
+    ``d = 1 + D tanh(amount * e / D)`` (``D`` = :data:`RIM_DENSITY`): about ``1 + amount * e``
+    for a faint rim, never beyond ``1 + D``, where the darkest rim is ``C^2`` and no colour
+    turns black (specks of black along a face's outline read as dirt, not pigment).
 
     Args:
         image: ``(B, C, H, W)`` colours in [0, 1].
@@ -142,7 +147,9 @@ def edge_darkening(
         strength = EDGE_GAIN * RIM_KNEE * F.softplus((mean_magnitude - threshold) / RIM_KNEE)
     else:
         strength = EDGE_GAIN * mean_magnitude
-    return pigment_density(image, 1.0 + as_map(amount, image, "amount") * strength)
+    pooled = as_map(amount, image, "amount") * strength
+    # saturates at the most pigment a rim holds: beyond d = 2 the density turns colours black
+    return pigment_density(image, 1.0 + RIM_DENSITY * torch.tanh(pooled / RIM_DENSITY))
 
 
 def wobble(image: torch.Tensor, texture: torch.Tensor, amount: ParamLike, scale: float | None = None) -> torch.Tensor:
@@ -377,7 +384,7 @@ def feature_accents(
     darkness ``y_photo / G(y_photo)`` is laid onto the washes' local tone: the target lightness is
     ``G(y_washes) * y_photo / G(y_photo)``. Where the washes are lighter than that target by more
     than ``threshold`` (rising smoothly to full at ``threshold + knee``) they are glazed down
-    towards it: ``washes * (target / y_washes) ** (strength * w)``. The global tone of the washes
+    towards it: ``washes * (1 + (target / y_washes - 1) strength w)``. The global tone of the washes
     (a pale preset) is kept, a large dark area (hair) is left as it is, and no wash is glazed
     below its target. Hue is kept: all channels scale alike.
 
@@ -405,4 +412,4 @@ def feature_accents(
     ramp = ((wash_light - target - threshold) / knee).clamp(0.0, 1.0)
     weight = ramp * ramp * (3.0 - 2.0 * ramp)  # smoothstep
     ratio = (target / wash_light).clamp(1e-3, 1.0)
-    return washes * ratio.pow(weight_map * weight)
+    return washes * (1.0 + (ratio - 1.0) * (weight_map * weight))
