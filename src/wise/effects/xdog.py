@@ -59,14 +59,14 @@ class XDoG(Effect):
         "portrait": _PORTRAIT,
         "pencil": {**_PORTRAIT, "shading": 0.5},
         "sketch": {
-            "brightness": 0.13,
+            "brightness": 0.14,
             "contrast": 1.0,
             "saturation": 0.0,
-            "details": 1.5,
+            "details": 2.0,
             "stroke_width": 0.4,
             "contour": 2.0,
             "blackness": 0.1,
-            "shading": 0.6,
+            "shading": 0.57,
         },
         "lines": {
             "brightness": 0.1,
