@@ -77,8 +77,8 @@ CAVITY_SHADE = 0.2
 paint catches ambient light by its height, so strokes of every direction show, also those
 running towards the light."""
 RIDGE_HEIGHT = 0.25
-"""Paint height (``tanh`` of it) above which a stroke's ridge can catch a highlight: the top few
-per cent of the bristle relief, so highlights stay small and sparse."""
+"""Paint height (``tanh`` of it) above which a stroke's ridge can catch a highlight, rising to full
+at the highest ridges: highlights stay small and sparse instead of a sheen over all the paint."""
 LIGHT_DIRECTION = (0.0, -1.0, 1.5)
 """Light from above, in front of the canvas: no side is preferred, so a mirrored picture is lit
 as the mirror of the picture."""
