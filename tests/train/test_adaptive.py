@@ -216,7 +216,8 @@ def test_layout_task_file_and_split_by_photo(pairs: tuple[Path, dict]) -> None:
     task = json.loads((folder / "task.json").read_text())
     assert set(task) == TASK_KEYS
     assert task["task"] == "background" and task["effect"] == "xdog" and task["preset"] == "sketch"
-    assert (task["parameter"], task["inside"], task["preset_value"]) == ("brightness", 0.45, 0.2)
+    sketch_brightness = effects.create("xdog").presets["sketch"]["brightness"]
+    assert (task["parameter"], task["inside"], task["preset_value"]) == ("brightness", 0.45, sketch_brightness)
     assert task["count"] == PAIR_COUNT and task["rule"] == TASKS["background"].description
     assert (task["size"], task["seed"], task["test_share"]) == (PAIR_SIZE, 1, 0.2)
     photos = {"astronaut.png", "coffee.png", "chelsea.png", "rocket.png", "more/astronaut.jpg"}
