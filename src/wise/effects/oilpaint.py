@@ -21,7 +21,7 @@ from wise.filters import (
     rgb_to_lab,
     smoothed_structure_tensor,
 )
-from wise.filters.gaussian import SUPPORT, local_deviation
+from wise.filters.gaussian import SUPPORT, local_detail
 from wise.filters.log import flow_log
 from wise.filters.noise import value_noise
 from wise.filters.shading import bump_phong
@@ -69,9 +69,13 @@ STROKE_FLOOR = 0.5
 """Share of the stroke length left where the paint does not vary: short dabs on skin and sky
 rather than long grooves that run across a face like wood grain."""
 RELIEF_VARIATION = 0.05
-"""Local deviation of the paint's lightness (L* / 100) at which the relief is halfway to full."""
+"""Local detail of the paint's lightness (L* / 100, :func:`~wise.filters.gaussian.local_detail`)
+at which the relief and the stroke length are halfway to full."""
+DETAIL_SIGMA = 2.0
+"""Scale of that detail (reference pixels): texture and edges count, the smooth shading of a
+cheek does not, so skin gets short, soft strokes."""
 VARIATION_SIGMA = 4.0
-"""Window of that deviation (reference pixels)."""
+"""Window over which the detail is averaged (reference pixels)."""
 CAVITY_SHADE = 0.2
 """Darkening of the grooves and lightening of the ridges per unit of paint height and relief:
 paint catches ambient light by its height, so strokes of every direction show, also those
@@ -169,7 +173,7 @@ class OilPaint(Effect):
         texture_reach = SUPPORT * (stroke_spec.max + brush_spec.max) * scale
         abstraction_reach = ABSTRACTION_FACTOR * (2 * 2 * 2 * self.kernel_size * math.sqrt(2.0) + 4)
         edge_reach = SUPPORT * 2 * EDGE_SIGMA * scale
-        variation_reach = SUPPORT * VARIATION_SIGMA * scale
+        variation_reach = SUPPORT * (DETAIL_SIGMA + VARIATION_SIGMA) * scale
         # the grooves across the strokes read strokes whose length follows the paint's variation there
         groove_reach = SUPPORT * brush_spec.max * scale + abstraction_reach + variation_reach
         return math.ceil(max(texture_reach, groove_reach, edge_reach)) + 4
@@ -233,7 +237,9 @@ class OilPaint(Effect):
         abstracted = self.stage(joint_bilateral_upsample, low_abstracted, lab, 1.0, UPSAMPLING_RANGE)
         colours = self.recomputed(lab_to_rgb, abstracted)
 
-        variation = self.stage(local_deviation, abstracted[:, :1] / LUMINANCE_RANGE, VARIATION_SIGMA, scale)
+        variation = self.stage(
+            local_detail, abstracted[:, :1] / LUMINANCE_RANGE, DETAIL_SIGMA, VARIATION_SIGMA, scale
+        )
         structured = variation / (variation + RELIEF_VARIATION)  # 0 on even paint, towards 1 where it varies
         stroke_length = p["stroke_length"] * (STROKE_FLOOR + (1.0 - STROKE_FLOOR) * structured)
         height = self.paint_height(tangent, stroke_length, p["brush_size"], ctx)

@@ -172,3 +172,24 @@ def local_deviation(image: torch.Tensor, sigma: float, scale: float | None = Non
     mean, mean_of_squares = gaussian_blur(torch.cat((image, image * image), dim=1), sigma, scale).chunk(2, dim=1)
     variance = (mean_of_squares - mean * mean).clamp_min(0.0)
     return torch.sqrt(variance + _DEVIATION_EPS) - math.sqrt(_DEVIATION_EPS)
+
+
+def local_detail(image: torch.Tensor, sigma: float, window: float, scale: float | None = None) -> torch.Tensor:
+    """The local amount of fine detail of each channel: the absolute difference of the image from
+    its Gaussian blur of ``sigma``, averaged in a Gaussian window of ``window``. Unlike
+    :func:`local_deviation` it is zero on smooth shading (a linear ramp equals its blur), so the
+    shading of a cheek does not count as structure, while texture and edges do.
+
+    Args:
+        image: ``(B, C, H, W)``.
+        sigma: scale of the detail, in pixels of a 512-pixel short side.
+        window: the averaging window, in pixels of a 512-pixel short side.
+        scale: pixels per reference pixel (default ``min(H, W) / 512``).
+
+    Returns:
+        ``(B, C, H, W)``, non-negative.
+    """
+    check_image(image)
+    difference = image - gaussian_blur(image, sigma, scale)
+    magnitude = torch.sqrt(difference * difference + _DEVIATION_EPS) - math.sqrt(_DEVIATION_EPS)
+    return gaussian_blur(magnitude, window, scale)
