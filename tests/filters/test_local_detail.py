@@ -1,6 +1,6 @@
 import torch
 
-from wise.filters.gaussian import local_deviation, local_detail
+from wise.filters.gaussian import local_detail, local_deviation
 
 
 def test_local_detail_ignores_smooth_shading_but_sees_texture() -> None:
