@@ -237,9 +237,7 @@ class OilPaint(Effect):
         abstracted = self.stage(joint_bilateral_upsample, low_abstracted, lab, 1.0, UPSAMPLING_RANGE)
         colours = self.recomputed(lab_to_rgb, abstracted)
 
-        variation = self.stage(
-            local_detail, abstracted[:, :1] / LUMINANCE_RANGE, DETAIL_SIGMA, VARIATION_SIGMA, scale
-        )
+        variation = self.stage(local_detail, abstracted[:, :1] / LUMINANCE_RANGE, DETAIL_SIGMA, VARIATION_SIGMA, scale)
         structured = variation / (variation + RELIEF_VARIATION)  # 0 on even paint, towards 1 where it varies
         stroke_length = p["stroke_length"] * (STROKE_FLOOR + (1.0 - STROKE_FLOOR) * structured)
         height = self.paint_height(tangent, stroke_length, p["brush_size"], ctx)
