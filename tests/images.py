@@ -28,6 +28,7 @@ def xdog_pairs(root: Path, size: int = 64, parameter: str = "shading", inside: f
     import torch
 
     from wise import effects
+    from wise.effects.base import window_scale
 
     effect = effects.create("xdog")
     preset = effect.preset("portrait")
@@ -48,7 +49,7 @@ def xdog_pairs(root: Path, size: int = 64, parameter: str = "shading", inside: f
         masks[:, index : index + 1][dark] = (inside - spec.min) / (spec.max - spec.min) - 0.5
         region = (dark[0, 0].numpy() * 255).astype(np.uint8)
         with torch.no_grad():
-            target = effect(tensor, masks)
+            target = effect(tensor, masks, scale=window_scale(size, size))  # as training renders them
         target_array = (target[0].permute(1, 2, 0).numpy() * 255.0).round().astype(np.uint8)
         Image.fromarray(target_array).save(root / split / "B" / f"{name}.png")
         Image.fromarray(region).save(root / split / "regions" / f"{name}.png")

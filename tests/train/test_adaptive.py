@@ -17,6 +17,7 @@ from PIL import Image
 from skimage import data, measure
 
 from wise import effects
+from wise.effects.base import window_scale
 from wise.errors import WiseError
 from wise.filters import gaussian_blur
 from wise.filters._checks import REFERENCE_SHORT_SIDE
@@ -33,11 +34,11 @@ BAND = 16
 (the rules' windows and the feather reach this far at :data:`SIDE`)."""
 RULES = {name: task.rule for name, task in TASKS.items()}
 TASK_KEYS = {
-    "task", "effect", "preset", "parameter", "inside", "preset_value", "size", "count", "seed", "test_share",
+    "task", "effect", "preset", "parameter", "inside", "preset_value", "size", "scale", "count", "seed", "test_share",
     "min_change", "rule", "train_photos", "test_photos",
 }  # fmt: skip
-PAIR_SIZE = 48
-CHANGE_BAND = 3
+PAIR_SIZE = 64
+CHANGE_BAND = 12
 """Pixels beyond the region's feathered border where a target may still differ from the preset's
 rendering (the effect's filters reach across the border)."""
 PAIR_COUNT = 8
@@ -280,7 +281,9 @@ def test_targets_differ_from_the_preset_only_in_the_region(pairs: tuple[Path, di
         clear = (soft - regions.INSIDE).abs() > 1e-4
         assert torch.equal(region[clear], (soft > regions.INSIDE)[clear])
         with torch.no_grad():
-            plain = effect(photo, preset.view(1, -1, 1, 1).expand_as(masks).contiguous())
+            plain = effect(
+                photo, preset.view(1, -1, 1, 1).expand_as(masks).contiguous(), scale=window_scale(*photo.shape[-2:])
+            )
         plain = (plain.clamp(0.0, 1.0) * 255.0).round() / 255.0
         near = F.max_pool2d(departed.float(), 2 * CHANGE_BAND + 1, stride=1, padding=CHANGE_BAND) > 0
         difference = (target - plain).abs().amax(dim=1, keepdim=True)
@@ -316,7 +319,7 @@ def test_too_few_photos_are_refused(photos: Path, tmp_path: Path) -> None:
     lonely = tmp_path / "lonely"
     lonely.mkdir()
     (lonely / "a.png").write_bytes((photos / "coffee.png").read_bytes())
-    with pytest.raises(WiseError, match="1 readable photos of at least 48 pixels a side .* at least 2"):
+    with pytest.raises(WiseError, match=f"1 readable photos of at least {PAIR_SIZE} pixels a side .* at least 2"):
         write_pairs(tmp_path / "out", AdaptiveSettings("details", size=PAIR_SIZE), images=lonely)
     assert not (tmp_path / "out").exists()
 
@@ -327,11 +330,8 @@ def test_pairs_whose_change_does_not_show_are_left_out(photos: Path, tmp_path: P
     visible = _make(tmp_path / "visible", photos, min_change=0.01)
     kept = visible["pairs"]["train"] + visible["pairs"]["test"]
     assert kept + visible["left_out"] == PAIR_COUNT and kept > 0
-    from wise import effects
-    from wise.io import read_image
-
     xdog = effects.create("xdog")
     for photo in (tmp_path / "visible" / "train" / "A").iterdir():
         target = read_image(photo.parent.parent / "B" / photo.name)
-        at_preset = xdog(read_image(photo), xdog.preset("sketch")[None])
+        at_preset = xdog(read_image(photo), xdog.preset("sketch")[None], scale=1.0)
         assert float((target - at_preset).abs().mean()) >= 0.01 - 2 / 255

@@ -10,6 +10,7 @@ from PIL import Image
 from skimage import data
 
 import wise
+from wise.effects.base import window_scale
 from wise.errors import WiseError
 from wise.optimize.trials import MIN_REFERENCE_CONTRAST
 from wise.train.data import ExampleDataset, checked_photos, photo_files, read_photos, split_files
@@ -78,7 +79,8 @@ def test_windows_are_tiles_of_a_larger_rendering_reduced(folder: Path) -> None:
     with torch.no_grad():
         as_part = dataset.reduced(effect(tile, params[None], scale=192 / 512).clamp(0, 1))[0]
         as_whole = dataset.reduced(effect(tile, params[None]).clamp(0, 1))[0]
-        at_network_size = effect(item["photo"][None], params[None], scale=48 / 512).clamp(0, 1)[0]
+        # at the reference scale: the network's 48 pixels are below the reference size
+        at_network_size = effect(item["photo"][None], params[None], scale=window_scale(48, 48)).clamp(0, 1)[0]
     assert float((as_part - item["example"]).abs().max()) <= 1 / 255 + 1e-6
     assert float((as_whole - item["example"]).abs().mean()) > 0.01
     # the image-space loss's reference: the true parameters at the network's size, from the photo it sees

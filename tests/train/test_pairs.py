@@ -174,9 +174,10 @@ def test_crops_keep_photo_target_and_region_aligned_through_flips(tmp_path: Path
 def test_scale_and_origin_locate_the_crop_in_the_resized_picture(tmp_path: Path) -> None:
     pairs = pair_files(_separate(tmp_path), "train")
     whole = PairDataset(pairs, load_size=48, crop_size=None, flip=False)[0]
-    assert whole["photo"].shape == (3, 48, 64) and whole["scale"] == 48 / 512
+    assert whole["photo"].shape == (3, 48, 64) and whole["scale"] == 1.0  # below 512: the reference scale
     assert whole["origin"].tolist() == [0, 0] and whole["name"] == "a"
-    assert PairDataset(pairs, None, None, False)[0]["scale"] == HEIGHT / 512
+    assert PairDataset(pairs, None, None, False)[0]["scale"] == 1.0
+    assert PairDataset(pairs, 768, None, False)[0]["scale"] == 768 / 512
     mirrored = whole["photo"].flip(-1)
     dataset = PairDataset(pairs, load_size=48, crop_size=16, flip=True, seed=1)
     seen = set()
@@ -189,7 +190,7 @@ def test_scale_and_origin_locate_the_crop_in_the_resized_picture(tmp_path: Path)
         flipped = torch.equal(item["photo"], mirrored[:, top : top + 16, left : left + 16])
         assert plain != flipped  # the window at origin of the picture, or of the mirrored picture after a flip
         seen.add(flipped)
-        assert item["scale"] == 48 / 512
+        assert item["scale"] == 1.0
     assert seen == {True, False}
     with pytest.raises(WiseError, match="larger than the load size"):
         PairDataset(pairs, 16, 24, False)

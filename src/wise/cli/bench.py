@@ -12,7 +12,7 @@ from wise.cli.outputs import output_file
 from wise.cli.parser import add_device, add_pixel_limit, add_size, command, device, exit_code
 from wise.errors import WiseError
 from wise.fidelity import load_inception, load_lpips
-from wise.optimize.benchmark import INIT_PPN, parse_init, recover
+from wise.optimize.benchmark import INIT_PPN, ITERATIONS, parse_init, recover
 from wise.optimize.refine import DEFAULT_BUDGET
 from wise.optimize.trials import photos_in
 from wise.ppn.modelfile import model_info, resolve_model
@@ -119,7 +119,11 @@ def register(commands: argparse._SubParsersAction) -> None:
     add_size(recover_parser, types.working_size, "the photos")
     recover_parser.add_argument("--seed", type=types.seed, default=0, help="seed of the random parameters")
     recover_parser.add_argument(
-        "--iters", type=types.iterations, default=300, metavar="N", help="iterations per trial, all levels"
+        "--iters",
+        type=types.iterations,
+        default=ITERATIONS,
+        metavar="N",
+        help=f"iterations per trial, all levels (default {ITERATIONS})",
     )
     recover_parser.add_argument(
         "--lr", type=types.positive_rate, default=0.1, help="learning rate of the coarsest level (default 0.1)"

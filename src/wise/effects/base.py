@@ -14,6 +14,20 @@ from wise.errors import WiseError, size_text
 from wise.filters._checks import REFERENCE_SHORT_SIDE
 from wise.params import ParamSpec
 
+LEAST_WINDOW_SCALE = 1.0
+
+
+def window_scale(height: int, width: int) -> float:
+    """The effect's scale (pixels per reference pixel) at which a picture of ``height`` × ``width``
+    is rendered where it must stay that small (training pairs, a model's working size): its short
+    side over the reference's 512, but at least :data:`LEAST_WINDOW_SCALE`.
+
+    At its own scale a 256-pixel picture would halve every structure of an effect and XDoG's
+    finest would fall under a pixel (no lines; ``wise apply`` renders such a picture at the
+    reference size and reduces it instead). At the reference scale it is drawn as a window of a
+    reference-size picture: the look users see, for the same pixels and so at no extra cost."""
+    return max(min(height, width) / REFERENCE_SHORT_SIDE, LEAST_WINDOW_SCALE)
+
 
 @dataclass(frozen=True)
 class RenderContext:
@@ -59,6 +73,10 @@ class Effect(nn.Module):
     position_dependent: ClassVar[bool] = False
     """Whether the look depends on where a tile sits in the picture (textures fixed to the
     paper), so that tiles with other origins must be rendered apart."""
+    searched_params: ClassVar[tuple[str, ...]] = ()
+    """Parameters whose gradient does not lead to their value from afar (a zero gradient at a
+    bound, a structure too fine for reduced copies): optimization of global parameters tries a
+    grid of each (:func:`wise.optimize.search.coordinate_search`) before its fine iterations."""
 
     def __init__(self, kernel_size: int = 3, checkpoint: bool = False) -> None:
         super().__init__()

@@ -101,6 +101,9 @@ class Watercolor(Effect):
     name = "watercolor"
     tile_pixels = 6_000_000  # its washes and textures keep many images per pixel: within 4 GB at 4096²
     position_dependent = True
+    # bleeding: a symmetric blur's reach has a zero gradient at zero reach; abstraction, flatness
+    # and edge darkening: structures at a few reference pixels, lost on the coarse levels' copies
+    searched_params = ("abstraction", "flatness", "bleeding", "edge_darkening")
     param_specs = (
         ParamSpec("brightness", -0.2, 0.3, 0.05, "added to the input colours"),
         ParamSpec("contrast", 0.5, 2.0, 1.0, "contrast of the input around mid-grey"),

@@ -13,6 +13,7 @@ import torch
 import torch.nn.functional as F
 
 from wise import effects
+from wise.effects.base import window_scale
 from wise.ppn.modelfile import BUILTIN_PREFIX, load_model, resolve_model
 from wise.ppn.translation import NO_EFFECT, Stages, Translator
 
@@ -87,8 +88,9 @@ class LocalPredictor:
     def finish(self, photo: torch.Tensor, masks: torch.Tensor | None) -> Stages:
         """Effect stage and final image of ``photo`` at the working size with ``masks`` (any size)."""
         small = at_short_side(photo, self.info.size).to(self.device)
+        scale = window_scale(*small.shape[-2:])  # the scale training rendered at
         if not self.translates:
-            stage = self.effect(small, masks.to(self.device))
+            stage = self.effect(small, masks.to(self.device), scale=scale)
             return Stages(masks, stage.cpu(), stage.cpu())
-        made = self.network.finish(small, None if masks is None else masks.to(self.device))
+        made = self.network.finish(small, None if masks is None else masks.to(self.device), scale)
         return Stages(masks, made.stage.float().cpu(), made.result.float().cpu())

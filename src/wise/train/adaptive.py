@@ -9,8 +9,10 @@ Each pair is a random square crop of a photo (a random share :data:`CROP_SHARES`
 side at a random position, flipped horizontally half of the time) resized to the pairs' size.
 The rule gives a soft region in [0, 1]; the parameter masks are the preset everywhere with the
 task's parameter blended from the preset's value to the task's value by the soft region; the
-effect renders the crop with them as the whole picture. Photos are split into training and test
-photos first, so all crops of a photo are in one split. Layout (read by :mod:`wise.train.pairs`)::
+effect renders the crop with them as the whole picture, at the scale training renders it at
+(:func:`wise.effects.base.window_scale`: the reference scale for crops below 512 pixels).
+Photos are split into training and test photos first, so all crops of a photo are in one
+split. Layout (read by :mod:`wise.train.pairs`)::
 
     PAIRS/task.json                        the task (:func:`task_description`)
     PAIRS/<split>/A/<name>.png             photo crop
@@ -37,7 +39,7 @@ import torch
 import torch.nn.functional as F
 
 from wise import effects
-from wise.effects.base import Effect
+from wise.effects.base import Effect, window_scale
 from wise.errors import WiseError, WiseWarning
 from wise.interrupt import ctrl_c
 from wise.io import atomic_path, write_image, write_together
@@ -319,11 +321,12 @@ def make_pair(effect: Effect, task: Task, preset: str, change: Change, crop: tor
     """The target, soft region and masks of a crop ``(1, 3, H, W)``: ``target`` ``(1, 3, H, W)``,
     ``soft`` ``(1, 1, H, W)``, ``masks`` ``(1, P, H, W)``, and ``change``: the mean absolute
     difference of the target from the preset's rendering (a scalar)."""
+    scale = window_scale(*crop.shape[-2:])
     with torch.no_grad():
         soft = task.rule(crop)
         masks = region_masks(effect, preset, change, soft)
-        target = effect(crop, masks).clamp(0.0, 1.0)
-        at_preset = effect(crop, effect.preset(preset)[None]).clamp(0.0, 1.0)
+        target = effect(crop, masks, scale=scale).clamp(0.0, 1.0)
+        at_preset = effect(crop, effect.preset(preset)[None], scale=scale).clamp(0.0, 1.0)
     return {"target": target, "soft": soft, "masks": masks, "change": (target - at_preset).abs().mean()}
 
 
@@ -363,6 +366,7 @@ def task_description(
         "inside": change.inside,
         "preset_value": preset_value(effect, preset, change.parameter),
         "size": settings.size,
+        "scale": window_scale(settings.size, settings.size),
         "count": sum(len(names) for names in made.values()),
         "seed": settings.seed,
         "test_share": settings.test_share,

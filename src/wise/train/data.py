@@ -29,6 +29,7 @@ from torch.utils.data import Dataset
 
 import wise
 from wise import effects
+from wise.effects.base import window_scale
 from wise.errors import WiseError
 from wise.files import read_safetensors
 from wise.filters._checks import REFERENCE_SHORT_SIDE
@@ -183,8 +184,9 @@ class ExampleDataset(Dataset):
 
     @property
     def network_scale(self) -> float:
-        """The effect's scale of the whole picture at the network's size."""
-        return self.size / REFERENCE_SHORT_SIDE
+        """The effect's scale of the whole picture at the network's size (the reference scale
+        below the reference size: :func:`wise.effects.base.window_scale`)."""
+        return window_scale(self.size, self.size)
 
     def _tile(self, photo: torch.Tensor, generator: torch.Generator) -> torch.Tensor:
         """A random window of a random picture of ``photo`` (a square part of ``SCALE_RANGE``
@@ -284,7 +286,8 @@ class ExampleDataset(Dataset):
     def cache_key(self) -> str:
         """A digest of everything the examples depend on: settings, photos and package version."""
         digest = hashlib.sha256()
-        fields = (wise.__version__, self.effect_name, self.size, self.render_size, self.window, self.length)
+        sizes = (self.size, self.render_size, self.network_scale, self.window, self.length)
+        fields = (wise.__version__, self.effect_name, *sizes)
         digest.update(repr((*fields, self.sampling, self.seed, self.procedural, self.augmentation)).encode())
         for photo in self.photos:
             digest.update(repr(tuple(photo.shape)).encode())

@@ -20,7 +20,7 @@ import numpy as np
 import torch
 
 from wise import effects, metrics
-from wise.effects.base import Effect
+from wise.effects.base import Effect, window_scale
 from wise.fidelity.fid import frechet_distance
 from wise.interrupt import ctrl_c
 from wise.io import atomic_path, read_image
@@ -165,7 +165,7 @@ def _measure(
             made = Stages(made.masks, _at(made.stage, target), _at(made.result, target))
         else:
             masks = predictor(photo)
-            result = effect(photo, masks)
+            result = effect(photo, masks, scale=window_scale(*photo.shape[-2:]))
             made = Stages(masks, result, result)
         row = {"name": pair.name, **_scores(made.result, target)}
         if perceptual is not None:
@@ -173,7 +173,7 @@ def _measure(
         if predictor.translates and effect is not None and predictor.network.post is not None:
             row.update({f"stage_{k}": v for k, v in _scores(made.stage.clamp(0.0, 1.0), target).items()})
         if effect is not None and preset is not None:
-            baseline = effect(photo, preset[None])
+            baseline = effect(photo, preset[None], scale=window_scale(*photo.shape[-2:]))
             row.update({f"baseline_{k}": v for k, v in _scores(baseline, target).items()})
     if made.masks is not None and made.masks.dim() == 4:
         row["tv"] = float(total_variation(made.masks))

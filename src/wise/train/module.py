@@ -9,7 +9,7 @@ import torch
 from torch.utils.data import DataLoader
 
 from wise import effects, ppn
-from wise.filters._checks import REFERENCE_SHORT_SIDE
+from wise.effects.base import window_scale
 from wise.filters.smoothing import annealed_temperature, smoothed_steps, softened_gradients
 from wise.train.data import ExampleDataset
 from wise.train.losses import prediction_loss
@@ -53,7 +53,7 @@ class GlobalPPN(L.LightningModule):
         self.effect = effects.create(effect).requires_grad_(False)
         self.network = ppn.create(architecture, len(self.effect.param_specs))
         self.loss_kind, self.lr = loss, lr
-        self.scale = size / REFERENCE_SHORT_SIDE
+        self.scale = window_scale(size, size)
 
     def forward(self, photo: torch.Tensor, example: torch.Tensor) -> torch.Tensor:
         return self.network(photo, example)

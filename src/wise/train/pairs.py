@@ -37,9 +37,9 @@ import torch.nn.functional as F
 from PIL import Image
 from torch.utils.data import Dataset
 
+from wise.effects.base import window_scale
 from wise.errors import WiseError, size_text
 from wise.files import open_regular
-from wise.filters._checks import REFERENCE_SHORT_SIDE
 from wise.io import IMAGE_SUFFIXES, MAX_IMAGE_BYTES, READ_FORMATS, pixel_limit, read_image
 from wise.io.common import one_line
 from wise.io.formats import webp_size
@@ -354,7 +354,7 @@ class PairDataset(Dataset):
     ``direction`` is the orientation returned (``"BtoA"``: B is the photo), whatever the one
     the pairs were listed with. Items are dicts: ``photo`` and ``target`` ``(3, h, w)``
     float32 in [0, 1], ``region`` ``(1, h, w)`` in [0, 1] when the pair has one, ``scale``
-    (the resized whole picture's short side / 512, the effect's scale of the whole picture),
+    (the effect's scale of the resized whole picture: :func:`wise.effects.base.window_scale`),
     ``origin`` (y, x) long: the crop's top-left in the resized whole picture, after a flip in
     the flipped whole picture (x = width - left - crop, the crop being the window at
     ``origin`` of the mirrored picture), and ``name``.
@@ -463,7 +463,7 @@ class PairDataset(Dataset):
         item: dict[str, torch.Tensor | float | str] = {
             "photo": images[0][0].contiguous(),
             "target": images[1][0].contiguous(),
-            "scale": min(height, width) / REFERENCE_SHORT_SIDE,
+            "scale": window_scale(height, width),
             "origin": torch.tensor([top, left], dtype=torch.int64),
             "name": pair.name,
         }
