@@ -43,9 +43,10 @@ RELAX_GAIN = 8.0
 COARSE_FLOW_BLUR = 8.0
 """Blur before the coarse structure tensor (reference pixels): the shading of a surface
 without the noise of its texture."""
-WIDE_FLOW_SIGMA = 48.0
+WIDE_FLOW_SIGMA = 96.0
 """Scale of the picture's structure that orients the strokes where no strong edge is near
-(reference pixels): the shading of a cheek, the lighting of a wall."""
+(reference pixels): the form of a face, the lighting of a wall. Wider than a cheek, so the strokes
+on skin run along the face instead of circling the brightest spot of the cheek."""
 ABSTRACTION_FACTOR = 2
 """The colour abstraction runs at 1/2 resolution and is joint-bilaterally upsampled."""
 UPSAMPLING_RANGE = 12.0
@@ -68,7 +69,7 @@ RELIEF_FLOOR = 0.15
 STROKE_FLOOR = 0.5
 """Share of the stroke length left where the paint does not vary: short dabs on skin and sky
 rather than long grooves that run across a face like wood grain."""
-RELIEF_VARIATION = 0.05
+RELIEF_VARIATION = 0.08
 """Local detail of the paint's lightness (L* / 100, :func:`~wise.filters.gaussian.local_detail`)
 at which the relief and the stroke length are halfway to full."""
 DETAIL_SIGMA = 2.0
