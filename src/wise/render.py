@@ -33,6 +33,11 @@ ENLARGEMENT_SHARPENING = 0.5
 TILE_ALIGNMENT = 8
 """Tiles and halos start on multiples of this, so stages that work at a reduced resolution
 see the same pixel grid in every tile."""
+GUIDE_MAX_SCALE = 2.0
+"""A picture rendered in tiles above this scale gets its guide made on a copy reduced to it and
+enlarged: the guide's finest structure is a reference pixel (two pixels at this scale), while
+its reach at full size (the flow of oil paint reads 300 reference pixels around each pixel)
+would need halos of thousands of pixels."""
 
 
 @dataclass(frozen=True)
@@ -132,7 +137,7 @@ def render(
     ``tile`` forces square cores of that size; by default the layout processes the fewest
     pixels with no padded tile above the effect's ``tile_pixels``. Memory stays that of one padded
     tile; the result, on ``image``'s device, equals rendering the whole picture at once up
-    to floating-point rounding.
+    to floating-point rounding, and above :data:`GUIDE_MAX_SCALE` up to a guide made at that scale.
     """
     device = torch.device(device) if device is not None else image.device
     batch, _, height, width = image.shape
@@ -157,8 +162,14 @@ def _guide(
     effect: Effect, image: torch.Tensor, params: torch.Tensor, scale: float, device: torch.device
 ) -> torch.Tensor:
     """The effect's :meth:`~wise.effects.base.Effect.guide` for the whole picture, made in tiles
-    with the guide's own halo, kept on ``image``'s device."""
+    with the guide's own halo (above :data:`GUIDE_MAX_SCALE` on a reduced copy), kept on
+    ``image``'s device."""
     batch, _, height, width = image.shape
+    if scale > GUIDE_MAX_SCALE:
+        factor = scale / GUIDE_MAX_SCALE
+        size = (max(1, round(height / factor)), max(1, round(width / factor)))
+        small = _guide(effect, reduced(image, size), params, min(size) / REFERENCE_SHORT_SIDE, device)
+        return F.interpolate(small, size=(height, width), mode="bilinear", align_corners=False)
     halo = _align(effect.guide_halo(scale))
     guide = image.new_empty((batch, effect.guide_channels, height, width))
     for t, crop, crop_params in _tile_inputs(
