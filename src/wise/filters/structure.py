@@ -177,7 +177,7 @@ def relaxed_structure_tensor(
 
     where ``U`` is :func:`unit_deviator`. Near edges ``S'`` is the local tensor; in flat
     regions the flow follows the strong edges nearby, and where there are none the direction
-    of the picture's structure at the wide scale (the slow shading of a cheek, the lighting
+    of the picture's structure at the wide scale (the form of a face, the lighting
     of a wall), at a fixed strength however weak it is. No direction is preferred, so the
     flow of a mirrored picture is the mirrored flow.
 
