@@ -23,3 +23,25 @@ def test_demo_transfer_writes_a_report(tmp_path, monkeypatch) -> None:
     monkeypatch.setattr(demo, "DEMO_SIZE", 32)
     report = demo.transfer_demo(tmp_path)
     assert report.exists() and "watercolor" in report.read_text()
+
+
+def test_the_demos_closing_hints_run_as_printed_in_a_new_shell(tmp_path, monkeypatch) -> None:
+    """After `make demo`, `wise` is not on a new shell's PATH: the hints name the script itself."""
+    import os
+    import shlex
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    monkeypatch.chdir(tmp_path)
+    out = Path("out")
+    demo.run(out)
+    venv_bin = str(Path(sys.executable).parent)
+    path = os.pathsep.join(p for p in os.environ.get("PATH", "").split(os.pathsep) if p != venv_bin)
+    monkeypatch.setenv("PATH", path)
+    apply_hint = next(line for line in demo.hints(out, out / "transfer" / "report.html") if " apply " in line)
+    command = apply_hint.split(": ", 1)[1]
+    done = subprocess.run(["bash", "-c", command], env={**os.environ, "PATH": path}, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "out" / "edited.png").exists()
+    assert shlex.split(command)[0] != "wise"  # the venv's script, since `wise` is not on this PATH

@@ -9,6 +9,8 @@ then optimized to re-create that reference, and a report shows the result and th
 from __future__ import annotations
 
 import argparse
+import shutil
+import sys
 import time
 from pathlib import Path
 
@@ -59,21 +61,39 @@ def transfer_demo(out_dir: Path) -> Path:
     return folder / "report.html"
 
 
+def wise_command() -> str:
+    """How to call ``wise`` from this shell: ``wise`` where it is on the PATH, else the script
+    beside this Python (``.venv/bin/wise`` after ``make demo``, relative to the current folder)."""
+    script = Path(sys.executable).parent / "wise"
+    on_path = shutil.which("wise")
+    if not script.exists() or (on_path is not None and Path(on_path).resolve() == script.resolve()):
+        return "wise"
+    try:
+        return str(script.relative_to(Path.cwd()))
+    except ValueError:
+        return str(script)
+
+
+def hints(out_dir: Path, report: Path) -> list[str]:
+    """The commands the demo suggests at its end, runnable as printed from the current folder."""
+    wise_cli = wise_command()
+    return [
+        f"Open the parametric style transfer report: {report}",
+        f"Paint its masks in the web editor: {wise_cli} edit {out_dir / 'astronaut.png'} "
+        f"--params {report.parent / 'params.safetensors'} (or: make edit)",
+        f"Re-render or edit with: {wise_cli} apply xdog {out_dir / 'astronaut.png'} "
+        f"--params {out_dir / 'xdog_portrait.safetensors'} -o {out_dir / 'edited.png'} --set blackness=0.3",
+    ]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description="Parametric style transfer and the XDoG presets on a bundled photo.")
     parser.add_argument("--out", type=Path, default=Path("out"), help="output directory (default: out)")
     args = parser.parse_args()
     run(args.out)
     report = transfer_demo(args.out)
-    print(f"Open the parametric style transfer report: {report}")
-    print(
-        f"Paint its masks in the web editor: wise edit {args.out / 'astronaut.png'} "
-        f"--params {report.parent / 'params.safetensors'} (or: make edit)"
-    )
-    print(
-        f"Re-render or edit with: wise apply xdog {args.out / 'astronaut.png'} "
-        f"--params {args.out / 'xdog_portrait.safetensors'} -o {args.out / 'edited.png'} --set blackness=0.3"
-    )
+    for line in hints(args.out, report):
+        print(line)
 
 
 if __name__ == "__main__":

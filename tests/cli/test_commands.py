@@ -73,7 +73,10 @@ def test_effects_marks_values_outside_range(capsys: pytest.CaptureFixture[str], 
 
 def test_apply_preset_set_and_kernel_size(tmp_path: Path, photo: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out1 = tmp_path / "preset.png"
-    assert run(["apply", "xdog", str(photo), "-o", str(out1), "--preset", "sketch", "--device", "cpu"], capsys)[0] == 0
+    argv = ["apply", "xdog", str(photo), "-o", str(out1), "--preset", "sketch", "--device", "cpu"]
+    code, printed, _ = run(argv, capsys)
+    assert code == 0
+    assert printed.startswith(f"wrote {out1} (64x48, ") and printed.endswith(" s)\n") and printed.count("\n") == 1
     out2 = tmp_path / "set.jpg"
     argv = [
         "apply",
@@ -87,6 +90,7 @@ def test_apply_preset_set_and_kernel_size(tmp_path: Path, photo: Path, capsys: p
         "contour=2",
         "--kernel-size",
         "2",
+        "--quiet",
     ]
     assert run(argv, capsys) == (0, "", "")
     a, b = read_image(out1), read_image(out2)

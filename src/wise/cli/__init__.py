@@ -21,6 +21,7 @@ from wise import __version__
 from wise.cli import apply, bench, data, edit, effects, optimize, predict, train
 from wise.cli.parser import EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_USAGE, PROG, Parser, apply_pixel_limit, one_line
 from wise.errors import WiseError, WiseWarning
+from wise.filters.fused import announce_compilation
 from wise.io import MAX_PIXELS_ENV
 
 COMMAND_GROUPS = (effects, apply, optimize, predict, train, data, edit, bench)
@@ -79,6 +80,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         return EXIT_INTERRUPTED
     previous_limit = apply_pixel_limit(args)
+    announce_compilation(lambda line: print(f"{PROG}: {line}", file=sys.stderr, flush=True))
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")

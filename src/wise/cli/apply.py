@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+import time
 from pathlib import Path
 from typing import TextIO
 
@@ -28,7 +29,7 @@ from wise.cli.parser import (
     device,
 )
 from wise.effects.base import Effect
-from wise.errors import WiseError
+from wise.errors import WiseError, size_text
 from wise.gallery import make_sheet
 from wise.io import WRITE_FORMATS, image_to_tensor, read_image, write_image
 from wise.ppn.translation import NO_EFFECT
@@ -81,7 +82,7 @@ def run_apply(args: argparse.Namespace, out: TextIO) -> int:
         return _apply_video(args, spec, out)
     if is_batch(args.inputs):
         return _apply_batch(args, spec, out)
-    return _apply_one(args, spec)
+    return _apply_one(args, spec, out)
 
 
 def _refuse_video_options(args: argparse.Namespace) -> None:
@@ -90,8 +91,9 @@ def _refuse_video_options(args: argparse.Namespace) -> None:
             raise WiseError(f"{option} is for a video input; leave it out for images")
 
 
-def _apply_one(args: argparse.Namespace, spec: LookSpec) -> int:
-    """One image to one file, as every image of a batch."""
+def _apply_one(args: argparse.Namespace, spec: LookSpec, out: TextIO) -> int:
+    """One image to one file, as every image of a batch; says what it wrote unless ``--quiet``."""
+    began = time.perf_counter()
     _refuse_video_options(args)
     if args.format is not None:
         raise WiseError(f"--format is for a folder of results; {args.output}'s own extension chooses its format")
@@ -101,7 +103,13 @@ def _apply_one(args: argparse.Namespace, spec: LookSpec) -> int:
     if params_file is not None:
         output_file(params_file, inputs, (PARAMS_SUFFIX,))
     look = Look(spec)
-    write(Job(Path(args.inputs[0]), output, params_file), look.render(read_image(args.inputs[0])), look, args.quality)
+    rendered = look.render(read_image(args.inputs[0]))
+    write(Job(Path(args.inputs[0]), output, params_file), rendered, look, args.quality)
+    if not args.quiet:
+        height, width = rendered.image.shape[-2:]
+        also = f" and {params_file}" if params_file is not None else ""
+        seconds = time.perf_counter() - began
+        print(f"wrote {output}{also} ({size_text(width, height)}, {seconds:.1f} s)", file=out, flush=True)
     return 0
 
 
@@ -233,6 +241,7 @@ def register(commands: argparse._SubParsersAction) -> None:
         action="store_true",
         help="also write each result's parameters (masks) next to it as NAME.safetensors, editable later",
     )
+    apply.add_argument("--quiet", action="store_true", help="print nothing for a single image that was written")
     add_pixel_limit(apply)
     many = apply.add_argument_group("many images")
     many.add_argument("--format", choices=("png", "jpg"), help="format of the results in a folder (default png)")

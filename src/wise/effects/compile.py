@@ -39,6 +39,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("dtypes", nargs="*", choices=sorted(DTYPES), default=["float32"])
     args = parser.parse_args(argv)
     began = time.perf_counter()
+    print(
+        f"compiling the CPU kernels of every effect for {', '.join(args.dtypes)} "
+        "(a minute or two, once: they are cached on disk)",
+        flush=True,
+    )
     if len(args.dtypes) == 1:
         compile_kernels(DTYPES[args.dtypes[0]])
     else:

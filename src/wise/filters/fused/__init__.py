@@ -22,9 +22,10 @@ from __future__ import annotations
 import importlib.util
 import os
 import signal
+import sys
 import threading
 from contextlib import contextmanager
-from typing import Iterator
+from typing import Callable, Iterator
 
 import torch
 
@@ -74,7 +75,52 @@ def _numba():
 
     if "NUMBA_THREADING_LAYER" not in os.environ:
         numba.config.THREADING_LAYER = "workqueue"
+    if _announce is not None:
+        _listen_for_compilation()
     return numba
+
+
+COMPILE_NOTICE = (
+    "compiling the CPU kernels on first use (about 20 s per effect, once: they are cached on disk; "
+    "`python -m wise.effects.compile` compiles them all ahead)"
+)
+"""What :func:`announce_compilation` prints when a kernel is compiled rather than loaded from the cache."""
+
+
+_announce: Callable[[str], None] | None = None
+_listening = False
+
+
+def _listen_for_compilation() -> None:
+    """Install, once per process, the Numba listener that hands :data:`COMPILE_NOTICE` to
+    ``_announce`` at the process's first compilation (Numba reports one only on a cache miss, so
+    a warm cache prints nothing)."""
+    global _listening
+    if _listening:
+        return
+    from numba.core import event
+
+    class Listener(event.Listener):
+        def on_start(self, _event: object) -> None:
+            global _announce
+            announce, _announce = _announce, None
+            if announce is not None:
+                announce(COMPILE_NOTICE)
+
+        def on_end(self, _event: object) -> None:
+            pass
+
+    event.register("numba:compile", Listener())
+    _listening = True
+
+
+def announce_compilation(print_line: Callable[[str], None]) -> None:
+    """Have ``print_line`` called once with :data:`COMPILE_NOTICE` when this process next compiles
+    a kernel instead of loading it from the cache, so that a command does not wait silently."""
+    global _announce
+    _announce = print_line
+    if "numba" in sys.modules:  # imported already: kernels may compile from now on
+        _listen_for_compilation()
 
 
 @contextmanager
