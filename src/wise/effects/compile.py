@@ -29,6 +29,8 @@ def compile_kernels(dtype: torch.dtype = torch.float32, size: int = 48) -> None:
         effect = effects.create(name).to(dtype)
         start = effect.default_params()[None].to(dtype)
         for params in (start, start[:, :, None, None].expand(-1, -1, size // 4, size // 4)):
+            with torch.no_grad():  # rendering (wise apply, the editor) takes kernels of its own
+                effect(image, params)
             params = params.clone().requires_grad_(True)
             picture = image.clone().requires_grad_(True)
             effect(picture, params).mean().backward()
@@ -36,8 +38,13 @@ def compile_kernels(dtype: torch.dtype = torch.float32, size: int = 48) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m wise.effects.compile", description=__doc__.splitlines()[0])
-    parser.add_argument("dtypes", nargs="*", choices=sorted(DTYPES), default=["float32"])
+    # no `choices`: Python 3.11's argparse checks an empty or default list against them as one value
+    parser.add_argument("dtypes", nargs="*", metavar="DTYPE", help=f"{' or '.join(sorted(DTYPES))} (default: float32)")
     args = parser.parse_args(argv)
+    args.dtypes = args.dtypes or ["float32"]
+    unknown = [name for name in args.dtypes if name not in DTYPES]
+    if unknown:
+        parser.error(f"unknown dtype {unknown[0]!r}; use {' or '.join(sorted(DTYPES))}")
     began = time.perf_counter()
     print(
         f"compiling the CPU kernels of every effect for {', '.join(args.dtypes)} "
