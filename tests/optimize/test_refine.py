@@ -41,3 +41,32 @@ def test_refinement_iterations_can_be_capped_and_the_budget_must_be_positive(pho
     assert len(outcome.losses) == 4 and outcome.seconds < 30.0
     with pytest.raises(WiseError, match="budget"):
         refine(effect, photo, photo, start, budget=0.0)
+
+
+class _Slow(torch.nn.Module):
+    """An effect whose renders take ``delay`` seconds per 256² pixels, and twice that every fourth
+    time, as on a busy machine."""
+
+    def __init__(self, effect: torch.nn.Module, delay: float) -> None:
+        super().__init__()
+        self.effect, self.delay, self.calls = effect, delay, 0
+        self.param_specs = effect.param_specs
+
+    def forward(self, image: torch.Tensor, params: torch.Tensor) -> torch.Tensor:
+        import time
+
+        self.calls += 1
+        time.sleep(self.delay * (2 if self.calls % 4 == 0 else 1) * image.shape[-2] * image.shape[-1] / 256**2)
+        return self.effect(image, params)
+
+
+def test_refinement_of_a_slow_case_stays_within_its_budget(photo: torch.Tensor) -> None:
+    """`wise predict` with --budget 8 must not spend more than 8.8 s: no iteration starts, nor a
+    level, that could end after the budget, the final renders included (the average iteration
+    and no render gave 3.2 s here)."""
+    effect = _Slow(wise.effects.create("xdog"), delay=0.15)
+    large = torch.nn.functional.interpolate(photo, size=(512, 512), mode="area")
+    start = effect.effect.default_params()
+    outcome = refine(effect, large, large, start, budget=2.0)
+    assert outcome.seconds <= 2.0 * 1.1, outcome.seconds
+    assert len(outcome.losses) >= 2

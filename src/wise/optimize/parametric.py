@@ -12,6 +12,7 @@ cheap and where a step of one mask pixel covers a larger region of the image.
 from __future__ import annotations
 
 import time
+from collections import deque
 from dataclasses import dataclass, field, replace
 from typing import Callable, Sequence
 
@@ -62,9 +63,10 @@ class Settings:
     levels: int = 3
     """Pyramid levels of :func:`pyramid` (1: every iteration at the working size)."""
     time_limit: float | None = None
-    """Seconds the iterations may take (None: all of them are run): no iteration starts that
-    would end later, on the average so far; annealing then follows the time spent as well as
-    the iterations done, whichever is further along."""
+    """Seconds the iterations and the final render may take (None: all of them are run): no
+    iteration starts that could end later, judged by the longest iteration and render so far;
+    annealing then follows the time spent as well as the iterations done, whichever is
+    further along."""
     anneal: float = 0.0
     """Step temperature at the first iteration (0 to 1), lowered to 0 by
     :func:`wise.filters.smoothing.annealed_temperature` (graduated non-convexity); 0: none."""
@@ -132,10 +134,17 @@ def _decay_learning_rate(optimizer: torch.optim.Optimizer, iteration: int) -> No
             group["lr"] *= DECAY
 
 
-def _next_would_overrun(time_limit: float, start: float, done: int) -> bool:
-    """Whether another iteration, as long as the average so far, would end after ``time_limit``."""
+RECENT_ITERATIONS = 3
+"""Iterations whose longest duration predicts the next one's (the longest rather than the average:
+on a busy machine one step can take twice as long as the one before; only recent ones, so that
+the slow first step of a process does not end the loop early)."""
+
+
+def _next_would_overrun(time_limit: float, start: float, iterations: deque[float], renders: deque[float]) -> bool:
+    """Whether another iteration and the final render, each as long as the longest recent one,
+    could end after ``time_limit``."""
     elapsed = time.perf_counter() - start
-    return elapsed + elapsed / done > time_limit
+    return elapsed + max(iterations) + max(renders) > time_limit
 
 
 def _progress(settings: Settings, iteration: int, start: float) -> float:
@@ -180,12 +189,16 @@ def optimize(
     outcome = Outcome(params=params.detach())
     start = time.perf_counter()
     output = None
+    iterations: deque[float] = deque(maxlen=RECENT_ITERATIONS)
+    renders: deque[float] = deque(maxlen=RECENT_ITERATIONS)
     try:
         for iteration in range(1, settings.iterations + 1):
+            began = time.perf_counter()
             optimizer.zero_grad(set_to_none=True)
             temperature = annealed_temperature(settings.anneal, _progress(settings, iteration, start))
             with inward_gradients(params.dim() == 4), smoothed_steps(temperature):
                 output = effect(content, params)
+            renders.append(time.perf_counter() - began)
             loss = image_loss(output)
             if settings.tv_weight > 0 and params.dim() == 4:
                 loss = loss + settings.tv_weight * total_variation(params)
@@ -201,7 +214,8 @@ def optimize(
             outcome.params = params.detach().clone()
             if on_step is not None:
                 on_step(iteration, value, output.detach())
-            if settings.time_limit is not None and _next_would_overrun(settings.time_limit, start, iteration):
+            iterations.append(time.perf_counter() - began)
+            if settings.time_limit is not None and _next_would_overrun(settings.time_limit, start, iterations, renders):
                 break
     except KeyboardInterrupt:
         outcome.interrupted = True

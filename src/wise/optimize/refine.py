@@ -36,6 +36,9 @@ REFINE_LR = 0.05
 refinement starts near the answer."""
 REFINE_ANNEAL = 0.3
 """Step temperature at the start of the coarsest level."""
+RENDER_SHARE = 1.5
+"""An iteration and the level's final render take about this many iterations' time: a level
+starts only when that much of the budget is left (estimated from the level before, per pixel)."""
 
 
 def _sides(content: torch.Tensor) -> list[tuple[int, float, float]]:
@@ -84,10 +87,13 @@ def refine(
     params = start
     losses: list[float] = []
     outcome: Outcome | None = None
+    seconds_per_pixel = 0.0  # of an iteration and a render at the level before
     for index, (side, share, rate) in enumerate(plan):
+        factor = side / min(content.shape[-2:])
+        size = (max(8, round(content.shape[-2] * factor)), max(8, round(content.shape[-1] * factor)))
         # the level's share of what is left, so that a level that ends early leaves its time to the next
         left = budget - (time.perf_counter() - began)
-        if left <= 0.0:
+        if left <= seconds_per_pixel * size[0] * size[1]:  # not even one iteration would fit
             break
         settings = Settings(
             mode=mode,
@@ -98,11 +104,10 @@ def refine(
             time_limit=left * share / sum(s for _, s, _ in plan[index:]),
             anneal=REFINE_ANNEAL if index == 0 else 0.0,
         )
-        factor = side / min(content.shape[-2:])
-        size = (max(8, round(content.shape[-2] * factor)), max(8, round(content.shape[-1] * factor)))
         small_content = F.interpolate(content, size=size, mode="area") if factor < 1 else content
         small_target = F.interpolate(target, size=size, mode="area") if factor < 1 else target
         outcome = optimize_coarse_to_fine(effect, small_content, small_target, params, ((1, settings),))
+        seconds_per_pixel = outcome.seconds / max(1, len(outcome.losses)) * RENDER_SHARE / (size[0] * size[1])
         params = outcome.params
         losses.extend(outcome.losses)
         if outcome.interrupted:
