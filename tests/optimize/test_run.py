@@ -97,3 +97,18 @@ def test_transfer_makes_the_reference_then_optimizes(images, tmp_path: Path) -> 
     assert main([*args, "--iters", "2", "--size", "32"]) == 0
     assert (out / "target.png").exists() and (out / "report.html").exists()
     assert read_image(out / "target.png").shape == read_image(images[0]).shape
+
+
+def test_progress_names_the_level_its_size_and_the_time_left() -> None:
+    from wise.optimize.parametric import Settings, pyramid
+    from wise.optimize.run import Progress
+
+    levels = pyramid(Settings(iterations=30))
+    progress = Progress(levels)
+    first_count = levels[0][1].iterations
+    early = progress.line(first_count, 0.05, torch.zeros(1, 3, 16, 20))
+    assert early.startswith(f"iteration {first_count}/30  level 1/{len(levels)} (20x16)  loss 0.05000  about ")
+    assert early.endswith(" s left")
+    assert progress.line(30, 0.01, torch.zeros(1, 3, 64, 80)).endswith(
+        f"level {len(levels)}/{len(levels)} (80x64)  loss 0.01000  about 0 s left"
+    )

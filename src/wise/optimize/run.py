@@ -5,8 +5,9 @@ from __future__ import annotations
 import json
 import math
 import sys
+import time
 from pathlib import Path
-from typing import TextIO
+from typing import Sequence, TextIO
 
 import torch
 import torch.nn.functional as F
@@ -58,9 +59,47 @@ def match_target(
             f"({size_text(size[1], size[0])} at the working size); crop the target to the content's aspect ratio"
         )
     if (height, width) != size:
-        print(f"resizing the target from {size_text(width, height)} to {size_text(size[1], size[0])}", file=out)
+        print(
+            f"resizing the target from {size_text(width, height)} to {size_text(size[1], size[0])}, "
+            "the content's working size (--size sets its short side)",
+            file=out,
+        )
         target = F.interpolate(target, size=size, mode="area" if height > size[0] else "bilinear", align_corners=None)
     return target.clamp(0.0, 1.0)
+
+
+class Progress:
+    """One line per report of an optimization on a pyramid: iteration, level and its size, loss,
+    and the time left, estimated from the time so far per pixel of the iterations done (a level
+    at half the size costs a quarter). The loss of a new level starts higher: it is measured on
+    a larger copy, with finer detail to match."""
+
+    def __init__(self, levels: Sequence[tuple[int, Settings]]) -> None:
+        self.levels = levels
+        self.began = time.perf_counter()
+
+    def _work(self, iterations: int) -> float:
+        """Pixel-weighted work of the first ``iterations`` iterations."""
+        work = 0.0
+        for reduction, level in self.levels:
+            done = min(iterations, level.iterations)
+            work, iterations = work + done / reduction**2, iterations - done
+        return work
+
+    def line(self, iteration: int, loss: float, output: torch.Tensor) -> str:
+        total = sum(level.iterations for _, level in self.levels)
+        first_of_level, level_index = 0, 0
+        for level_index, (_, level) in enumerate(self.levels):
+            if iteration <= first_of_level + level.iterations:
+                break
+            first_of_level += level.iterations
+        height, width = output.shape[-2:]
+        done = self._work(iteration)
+        left = (time.perf_counter() - self.began) * (self._work(total) - done) / max(done, 1e-9)
+        return (
+            f"iteration {iteration}/{total}  level {level_index + 1}/{len(self.levels)} "
+            f"({size_text(width, height)})  loss {loss:.5f}  about {left:.0f} s left"
+        )
 
 
 def init_is_file(init: str) -> bool:
@@ -107,15 +146,16 @@ def run(
     folder.mkdir(parents=True, exist_ok=True)
 
     frames, every = [], max(1, settings.iterations // ANIMATION_FRAMES)
+    levels = pyramid(settings)
+    progress = Progress(levels)
 
     def on_step(iteration: int, loss: float, output: torch.Tensor) -> None:
         if iteration % every == 0 or iteration == 1:
             frame = F.interpolate(output, size=size_hw, mode="nearest") if output.shape[-2:] != size_hw else output
             frames.append(tensor_to_image(frame.cpu()))
         if iteration % PROGRESS_EVERY == 0 or iteration == settings.iterations:
-            print(f"iteration {iteration}/{settings.iterations}  loss {loss:.5f}", file=out, flush=True)
+            print(progress.line(iteration, loss, output), file=out, flush=True)
 
-    levels = pyramid(settings)
     with ctrl_c(out) as interruption:
         outcome = optimize_coarse_to_fine(effect, content, target, start_params.to(device), levels, on_step)
         interruption.hold()
