@@ -2,13 +2,14 @@
 
 Usage::
 
-    python benchmarks/bench_editor_load.py [--sessions 8] [--strokes 50] [--effect xdog] [--size 512]
+    python benchmarks/bench_editor_load.py [--sessions 8] [--strokes 50] [--effect xdog] [--size 512] [--quick]
 
 Starts the editor (uvicorn in a subprocess, as ``wise edit`` does) on the astronaut at
 ``--size`` pixels square. Each session is a thread with its own cookie that sends its strokes,
-each followed by a preview request, as the page does. Every request must succeed; then each
-session's saved masks (``/api/params.safetensors``) must equal those of its strokes replayed
-alone in a fresh in-process session, so sessions neither lose edits nor see each other's.
+each followed by a preview request (``--quick``: the quick preview first, as the page now
+asks). Every request must succeed; then each session's saved masks (``/api/params.safetensors``)
+must equal those of its strokes replayed alone in a fresh in-process session, so sessions
+neither lose edits nor see each other's.
 Prints the latency of strokes and previews (median, 95th percentile), requests per second and
 the total time as a markdown table.
 """
@@ -52,6 +53,7 @@ class Browser:
     strokes: list[dict]
     stroke_seconds: list[float] = field(default_factory=list)
     preview_seconds: list[float] = field(default_factory=list)
+    quick_seconds: list[float] = field(default_factory=list)
     errors: list[str] = field(default_factory=list)
     saved: bytes = b""
 
@@ -98,14 +100,20 @@ def make_strokes(
     return strokes
 
 
-def paint(url: str, browser: Browser, start: threading.Barrier) -> None:
+def paint(url: str, browser: Browser, start: threading.Barrier, quick: bool = False) -> None:
+    """The session's strokes, each followed by the page's preview requests (``quick``: the quick
+    preview, then the full one)."""
+    requests = [("/api/stroke", browser.stroke_seconds)]
+    if quick:
+        requests.append(("/api/preview?quick=1", browser.quick_seconds))
+    requests.append(("/api/preview", browser.preview_seconds))
     with httpx.Client(base_url=url, timeout=300) as client:
         if client.get("/api/state").status_code != 200:
             browser.errors.append("no session")
             return
         start.wait()
         for stroke in browser.strokes:
-            for path, seconds in (("/api/stroke", browser.stroke_seconds), ("/api/preview", browser.preview_seconds)):
+            for path, seconds in requests:
                 began = time.perf_counter()
                 try:
                     response = client.post(path, json=stroke) if path == "/api/stroke" else client.get(path)
@@ -152,6 +160,9 @@ def main() -> None:
     parser.add_argument("--effect", default="xdog")
     parser.add_argument("--size", type=int, default=512)
     parser.add_argument(
+        "--quick", action="store_true", help="each stroke's quick preview before the full one, as the page asks"
+    )
+    parser.add_argument(
         "--scattered", action="store_true", help="strokes of points scattered over the whole image instead of drags"
     )
     args = parser.parse_args()
@@ -168,7 +179,7 @@ def main() -> None:
         try:
             start = threading.Barrier(args.sessions + 1)
             url = f"http://127.0.0.1:{port}"
-            threads = [threading.Thread(target=paint, args=(url, b, start)) for b in browsers]
+            threads = [threading.Thread(target=paint, args=(url, b, start, args.quick)) for b in browsers]
             for thread in threads:
                 thread.start()
             start.wait()
@@ -193,12 +204,17 @@ def main() -> None:
     strokes = [t for b in browsers for t in b.stroke_seconds]
     previews = [t for b in browsers for t in b.preview_seconds]
     both = [a + b for browser in browsers for a, b in zip(browser.stroke_seconds, browser.preview_seconds)]
-    requests = len(strokes) + len(previews)
+    quick = [t for b in browsers for t in b.quick_seconds]
+    first = [a + b for browser in browsers for a, b in zip(browser.stroke_seconds, browser.quick_seconds)]
+    requests = len(strokes) + len(previews) + len(quick)
     print(f"{args.sessions} sessions x {args.strokes} strokes + previews, {args.effect}, {args.size}x{args.size}")
     print()
     print("| request | count | median | 95th percentile |")
     print("| --- | --- | --- | --- |")
-    for name, seconds in (("stroke", strokes), ("preview", previews), ("stroke + preview", both)):
+    rows = [("stroke", strokes), ("preview", previews), ("stroke + preview", both)]
+    if quick:
+        rows += [("quick preview", quick), ("stroke + quick preview (first visible)", first)]
+    for name, seconds in rows:
         print(
             f"| {name} | {len(seconds)} | {statistics.median(seconds) * 1000:.0f} ms "
             f"| {percentile(seconds, 0.95) * 1000:.0f} ms |"

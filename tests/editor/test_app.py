@@ -459,3 +459,21 @@ def test_a_full_editor_refuses_new_browsers_until_a_session_is_left_alone(client
     assert _client(client.app).get("/api/state").status_code == 200
     assert browsers[0].get("/api/state").json()["can_undo"] is False  # the one left alone went
     assert all(b.get("/api/state").json()["can_undo"] for b in browsers[1:])
+
+
+def test_a_quick_preview_shows_a_stroke_at_a_reduced_size(client: TestClient) -> None:
+    """The page shows a stroke at once from a quick preview (a seventh of the pixels), then the full one."""
+    large = _png(np.asarray(Image.fromarray(data.astronaut()).resize((512, 384), Image.BICUBIC)))
+    assert client.post("/api/image", content=large, headers={"X-File-Name": "astronaut.png"}).status_code == 200
+    before = _decode(client.get("/api/preview?quick=1").content).astype(int)
+    state = _stroke(client).json()
+    quick = client.get("/api/preview?quick=1")
+    assert int(quick.headers["X-Wise-Version"]) == state["version"]
+    shown = _decode(quick.content).astype(int)
+    assert shown.shape == before.shape == (192, 256, 3)
+    difference = np.abs(shown - before).max(axis=2)
+    assert difference[36:42, 40:220].mean() > 5  # under the stroke (row 0.2 of 192)
+    assert difference[130:, :].max() == 0  # far below it
+    full = client.get("/api/preview")
+    assert _decode(full.content).shape == (384, 512, 3)
+    assert int(full.headers["X-Wise-Version"]) == state["version"]

@@ -134,8 +134,15 @@ def test_paint_undo_repaint_save_and_export(editor_url: str, browser, tmp_path: 
     page.locator("#brush-size").fill("60")
     page.locator("#brush-hardness").fill("80")
     stroke = ((0.15, 0.3), (0.85, 0.3))
+    page.evaluate(
+        "() => { window.previewLoads = []; const img = document.getElementById('preview');"
+        " img.addEventListener('load', () => window.previewLoads.push(img.naturalWidth)); }"
+    )
     _drag(page, *stroke)
     _wait_until_shown(page)
+    loads = page.evaluate("() => window.previewLoads")
+    assert loads[0] == 192 and loads[-1] == 512, f"quick preview first, then the full one: {loads}"
+    assert page.locator("#preview").bounding_box()["width"] > 400  # the quick one is shown at the full size
     painted = _preview(page)
     assert np.array_equal(_on_screen(page), painted)
     difference = np.abs(painted - before).max(axis=2)

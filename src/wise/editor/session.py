@@ -37,6 +37,10 @@ from wise.render import render, rerender
 
 PREVIEW_SHORT_SIDE = 512
 """Short side of the preview and of the masks made for an image without a parameter file."""
+QUICK_SHORT_SIDE = 192
+"""Short side of the quick preview shown while the full preview of a stroke renders: a seventh
+of its pixels, rendered at its own scale (the finest strokes and lines thin out), so that a
+stroke shows within a fraction of a second."""
 MIN_IMAGE_SIDE = 8
 MAX_HISTORY = 100
 """Most undo steps kept per session (each holds one parameter's mask)."""
@@ -414,6 +418,22 @@ class EditorSession:
         png = preview_png(made.clamp(0.0, 1.0))
         self._drawn = _Drawn(snapshot.version, snapshot.effect, content, snapshot.masks, made, png)
         return png
+
+    def render_quick(self, snapshot: Snapshot) -> bytes:
+        """A quick, reduced preview of a snapshot as PNG (:data:`QUICK_SHORT_SIDE`): the look of
+        the full preview at a glance, while that one renders; the full preview is drawn as
+        before. A translator's preview is drawn in full."""
+        content = self._require_content(snapshot)
+        if self.translator is not None and self.translator.info.effect == snapshot.effect.name:
+            return self.render_preview(snapshot)
+        small = preview_size(tuple(content.preview.shape[-2:]), QUICK_SHORT_SIDE)
+        image = (
+            content.preview
+            if small == tuple(content.preview.shape[-2:])
+            else F.interpolate(content.preview, size=small, mode="area")
+        )
+        made = render(snapshot.effect.eval(), image, snapshot.masks, at_reference=False)
+        return preview_png(made.clamp(0.0, 1.0))
 
     def content_preview(self) -> bytes:
         content = self._require_content(self.snapshot())

@@ -6,7 +6,8 @@
 const $ = (id) => document.getElementById(id);
 const editor = {
   server: null,        // the last state the server sent
-  shown: -1,           // the state version of the preview on screen
+  shown: -1,           // the state version of the full preview on screen
+  quick: -1,           // the state version of the quick preview last shown
   rendering: false,
   pendingEdits: 0,
   queue: Promise.resolve(),
@@ -58,23 +59,39 @@ function edit(request) {
   return editor.queue;
 }
 
+// A new state is shown twice: at once as a quick, reduced preview, then in full. The full one
+// is skipped while newer edits keep coming (their quick previews show them); it is drawn
+// for the newest state once the edits have stopped.
 async function refresh() {
   const state = editor.server;
   if (!state || !state.content || editor.rendering || state.version === editor.shown) { setStatus(); return; }
   editor.rendering = true;
   setStatus();
   try {
+    if (state.version !== editor.quick) {
+      const quick = await api("/api/preview?quick=1");
+      const version = Number(quick.headers.get("X-Wise-Version"));
+      const blob = await quick.blob();
+      if (version > editor.shown) {
+        await showImage($("preview"), blob);
+        editor.quick = version;
+        clearStroke();
+      }
+      if (editor.pendingEdits > 0 || editor.server.version !== version) return;  // newer edits: quick first
+    }
     const response = await api("/api/preview");
     const version = Number(response.headers.get("X-Wise-Version"));
     await showImage($("preview"), await response.blob());
     editor.shown = version;
+    editor.quick = version;
     clearStroke();
   } catch (error) {
     showError(error);
     editor.shown = state.version; // do not retry a failing render in a loop
   } finally {
     editor.rendering = false;
-    if (editor.server.version !== editor.shown) refresh(); else setStatus();
+    // an edit in flight calls refresh when its reply comes
+    if (editor.server.version !== editor.shown && editor.pendingEdits === 0) refresh(); else setStatus();
   }
 }
 
@@ -126,6 +143,8 @@ function applyState(state) {
       || previous.version > state.version)) {
     api("/api/content").then((r) => r.blob()).then((b) => showImage($("content"), b)).catch(showError);
   }
+  // the quick preview is smaller than the full one: both are shown at the full one's size
+  if (hasContent) $("preview").width = state.content.preview_width;
   updateMask();
   updateBrushValue(false);
 }
