@@ -178,6 +178,16 @@ def _map(dataset: Any, fn: type, **options: Any) -> Any:
         return dataset.map_batches(fn, **options)
 
 
+def _actor_pool(ray: Any, actors: int) -> Any:
+    """``actors`` actors (no idle one), each rendering one image at a time: an actor that dies
+    then takes only its own image down, and the images queued behind it are not lost with it.
+    Older Rays without the option queue a few per actor."""
+    try:
+        return ray.data.ActorPoolStrategy(size=actors, max_tasks_in_flight_per_actor=1)
+    except TypeError:
+        return ray.data.ActorPoolStrategy(size=actors)
+
+
 def _machine_cores() -> int:
     try:
         return len(os.sched_getaffinity(0))
@@ -382,7 +392,7 @@ def _run_pipeline(
                 fn_constructor_args=(_for_actors(spec, where.device), quality, where.threads),
                 batch_size=1,
                 batch_format="numpy",
-                compute=ray.data.ActorPoolStrategy(size=min(where.actors, blocks)),  # no idle actor
+                compute=_actor_pool(ray, min(where.actors, blocks)),
                 num_cpus=where.threads,
                 num_gpus=where.gpus,
                 runtime_env={"env_vars": environment} if environment else None,
