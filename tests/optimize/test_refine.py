@@ -70,3 +70,14 @@ def test_refinement_of_a_slow_case_stays_within_its_budget(photo: torch.Tensor) 
     outcome = refine(effect, large, large, start, budget=2.0)
     assert outcome.seconds <= 2.0 * 1.1, outcome.seconds
     assert len(outcome.losses) >= 2
+
+
+def test_refinement_starts_from_the_number_of_levels_of_a_cartoon_example(photo: torch.Tensor) -> None:
+    effect = wise.effects.create("cartoon")
+    truth = effect.params_from_dict({"bins": 4.0, "softness": 0.1})[None]
+    with torch.no_grad():
+        example = effect(photo, truth)
+    start = effect.params_from_dict({"bins": 12.0, "softness": 0.8})[None]
+    outcome = refine(effect, photo, example, start, budget=30.0, max_iterations=1)
+    found = effect.params_to_dict(outcome.params[0])
+    assert found["bins"] == pytest.approx(4.0, abs=0.3) and found["softness"] < 0.3

@@ -112,3 +112,13 @@ def test_progress_names_the_level_its_size_and_the_time_left() -> None:
     assert progress.line(30, 0.01, torch.zeros(1, 3, 64, 80)).endswith(
         f"level {len(levels)}/{len(levels)} (80x64)  loss 0.01000  about 0 s left"
     )
+
+
+def test_optimize_reads_the_number_of_levels_off_the_target_first(images, tmp_path: Path, capsys) -> None:
+    out = tmp_path / "read"
+    assert main(optimize_args(images, out, "--iters", "1", "--size", "48", "--mode", "global")) == 0
+    said = capsys.readouterr().out
+    line = next(line for line in said.splitlines() if line.startswith("read off the target: "))
+    assert "bins 4." in line  # the bold preset's 4 levels
+    params = json.loads((out / "metrics.json").read_text()).get("params")
+    assert params is None or params["bins"] == pytest.approx(4.0, abs=0.5)

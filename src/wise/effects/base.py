@@ -159,6 +159,13 @@ class Effect(nn.Module):
         """How many pixels around a tile :meth:`guide` reads at ``scale`` (an upper bound)."""
         raise NotImplementedError(f"effect {self.name!r} has no guide")
 
+    def real_values(
+        self, image: torch.Tensor, params: torch.Tensor, scale: float | None = None
+    ) -> tuple[dict[str, torch.Tensor], RenderContext]:
+        """The parameters in real units as :meth:`render` reads them, and the context of
+        ``image`` as a whole picture: for code that runs single stages of the pipeline."""
+        return self._prepare(image, params, scale, (0, 0))
+
     def _prepare(
         self, image: torch.Tensor, params: torch.Tensor, scale: float | None, origin: tuple[int, int]
     ) -> tuple[dict[str, torch.Tensor], RenderContext]:

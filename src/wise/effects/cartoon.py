@@ -89,13 +89,14 @@ class Cartoon(Effect):
     def halo(self, scale: float) -> int:
         return flow_pipeline_halo(scale, self.kernel_size, ABSTRACTION_ITERATIONS)
 
-    def render(self, image: torch.Tensor, p: Mapping[str, torch.Tensor], ctx: RenderContext) -> torch.Tensor:
+    def abstraction(
+        self, image: torch.Tensor, p: Mapping[str, torch.Tensor], ctx: RenderContext
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """The abstracted colours in CIE Lab and the edge tangent flow the outlines follow."""
         sigmas = detail_sigmas(p["details"])
-        samples, scale = self.kernel_size, ctx.scale
-
         adjusted = self.recomputed(adjust_color, image, **colour_adjustments(p))
         lab = self.recomputed(rgb_to_lab, adjusted)
-        tangent = self.stage(edge_flow, lab[:, :1], sigmas["structure"], scale)
+        tangent = self.stage(edge_flow, lab[:, :1], sigmas["structure"], ctx.scale)
         abstracted = lab
         for _ in range(ABSTRACTION_ITERATIONS):
             abstracted = self.stage(
@@ -104,9 +105,13 @@ class Cartoon(Effect):
                 tangent,
                 sigmas["bilateral_spatial"],
                 sigmas["bilateral_range"],
-                samples,
-                scale,
+                self.kernel_size,
+                ctx.scale,
             )
+        return abstracted, tangent
+
+    def render(self, image: torch.Tensor, p: Mapping[str, torch.Tensor], ctx: RenderContext) -> torch.Tensor:
+        abstracted, tangent = self.abstraction(image, p, ctx)
         luminance = abstracted[:, :1] / LUMINANCE_RANGE
         outlines = self.stage(
             xdog_lines,
@@ -115,9 +120,9 @@ class Cartoon(Effect):
             p["stroke_width"],
             p["contour"],
             p["blackness"],
-            sigmas["edge_smoothing"],
-            samples,
-            scale,
+            detail_sigmas(p["details"])["edge_smoothing"],
+            self.kernel_size,
+            ctx.scale,
         )
         levels = self.stage(quantize, luminance.clamp(0.0, 1.0), p["bins"], p["softness"])
         colours = self.recomputed(lab_to_rgb, torch.cat((levels * LUMINANCE_RANGE, abstracted[:, 1:]), dim=1))

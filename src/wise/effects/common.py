@@ -66,11 +66,26 @@ def xdog_lines(
     """Flow-based XDoG (Winnemöller et al. 2012): black lines on white, ``(B, 1, H, W)``.
 
     ``luminance`` is normalized to [0, 1]; DoG across the flow, line-integral smoothing along
-    it, soft threshold at ``blackness``.
+    it (:func:`edge_response`), soft threshold at ``blackness``.
     """
+    response = edge_response(luminance, tangent, stroke_width, contour, edge_smoothing, kernel_size, scale)
+    return xdog_threshold(response, blackness, EDGE_SHARPNESS)
+
+
+def edge_response(
+    luminance: torch.Tensor,
+    tangent: torch.Tensor,
+    stroke_width: torch.Tensor | float,
+    contour: torch.Tensor | float,
+    edge_smoothing: torch.Tensor,
+    kernel_size: int,
+    scale: float,
+) -> torch.Tensor:
+    """The XDoG response before its threshold, ``(B, 1, H, W)``: the flow DoG with sharpening
+    ``CONTOUR_GAIN * contour``, smoothed along the flow. Both steps are linear in the
+    sharpening, so the response is ``u(0) + contour * (u(1) - u(0))``."""
     edges = flow_dog(luminance, tangent, stroke_width, CONTOUR_GAIN * contour, kernel_size + 2, scale)
-    smoothed = flow_smoothing(edges, tangent, edge_smoothing, scale=scale)
-    return xdog_threshold(smoothed, blackness, EDGE_SHARPNESS)
+    return flow_smoothing(edges, tangent, edge_smoothing, scale=scale)
 
 
 def flow_pipeline_halo(scale: float, kernel_size: int, bilateral_applications: int) -> int:

@@ -83,18 +83,27 @@ class XDoG(Effect):
     def halo(self, scale: float) -> int:
         return flow_pipeline_halo(scale, self.kernel_size, 1)
 
-    def render(self, image: torch.Tensor, p: Mapping[str, torch.Tensor], ctx: RenderContext) -> torch.Tensor:
-        scale = ctx.scale
+    def abstraction(
+        self, image: torch.Tensor, p: Mapping[str, torch.Tensor], ctx: RenderContext
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """The abstracted luminance in [0, 1] and the edge tangent flow the lines follow."""
         sigmas = detail_sigmas(p["details"])
-        samples = self.kernel_size
-
         adjusted = self.recomputed(adjust_color, image, **colour_adjustments(p))
         lab = self.recomputed(rgb_to_lab, adjusted)
-        tangent = self.stage(edge_flow, lab[:, :1], sigmas["structure"], scale)
+        tangent = self.stage(edge_flow, lab[:, :1], sigmas["structure"], ctx.scale)
         abstracted = self.stage(
-            oriented_bilateral, lab, tangent, sigmas["bilateral_spatial"], sigmas["bilateral_range"], samples, scale
+            oriented_bilateral,
+            lab,
+            tangent,
+            sigmas["bilateral_spatial"],
+            sigmas["bilateral_range"],
+            self.kernel_size,
+            ctx.scale,
         )
-        luminance = abstracted[:, :1] / LUMINANCE_RANGE
+        return abstracted[:, :1] / LUMINANCE_RANGE, tangent
+
+    def render(self, image: torch.Tensor, p: Mapping[str, torch.Tensor], ctx: RenderContext) -> torch.Tensor:
+        luminance, tangent = self.abstraction(image, p, ctx)
         lines = self.stage(
             xdog_lines,
             luminance,
@@ -102,9 +111,9 @@ class XDoG(Effect):
             p["stroke_width"],
             p["contour"],
             p["blackness"],
-            sigmas["edge_smoothing"],
-            samples,
-            scale,
+            detail_sigmas(p["details"])["edge_smoothing"],
+            self.kernel_size,
+            ctx.scale,
         )
         shading = 1.0 - p["shading"] * (1.0 - luminance.clamp(0.0, 1.0))
         return (lines * shading).expand(-1, 3, -1, -1)

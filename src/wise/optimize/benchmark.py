@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Callable, TextIO
 
@@ -30,6 +31,7 @@ from wise.optimize.parametric import (
     optimize_on_crops,
     pyramid,
 )
+from wise.optimize.inversion import inversion_between_levels, read_steps
 from wise.optimize.search import coordinate_search
 from wise.optimize.trials import PSNR_CAP, Column, mean_of, random_reference, run_trials
 from wise.ppn.predictor import Predictor
@@ -93,7 +95,17 @@ def _trial(
     """One trial: random parameters, their reference, and the optimization's outcome."""
     truth, reference = random_reference(effect, content, generator)
     start = effect.default_params() if predictor is None else predictor(content, reference)
-    outcome = optimize_coarse_to_fine(effect, content, reference, start, levels)
+    began = time.perf_counter()
+    start, held = read_steps(effect, content, reference, start.reshape(1, -1))
+    levels = tuple((reduction, replace(settings, held=held)) for reduction, settings in levels)
+    crops = None if crops is None else replace(crops, held=held)
+    between = inversion_between_levels(effect, content, reference)
+    outcome = optimize_coarse_to_fine(effect, content, reference, start, levels, between_levels=between)
+    if between is not None and not outcome.interrupted:
+        outcome.params = between(outcome.params)
+        with torch.no_grad():
+            outcome.result = effect(content, outcome.params)
+    outcome.seconds = time.perf_counter() - began  # the estimates included
     if effect.searched_params and not outcome.interrupted:
         began = time.perf_counter()
         outcome.params, _ = coordinate_search(effect, content, reference, outcome.params)

@@ -70,6 +70,9 @@ class Settings:
     anneal: float = 0.0
     """Step temperature at the first iteration (0 to 1), lowered to 0 by
     :func:`wise.filters.smoothing.annealed_temperature` (graduated non-convexity); 0: none."""
+    held: tuple[str, ...] = ()
+    """Parameters descent leaves where they are (read off the example in closed form,
+    :mod:`wise.optimize.inversion`): their gradient is set to zero."""
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
@@ -125,6 +128,12 @@ def initial_params(effect: Effect, init: torch.Tensor, mode: str, size: tuple[in
     if params.dim() == 2:
         return params[:, :, None, None].expand(-1, -1, *size).clone()
     return torch.nn.functional.interpolate(params, size=size, mode="bilinear", align_corners=False)
+
+
+def _hold(params: torch.Tensor, effect: Effect, held: tuple[str, ...]) -> None:
+    """No step for the ``held`` parameters: their gradient (global or per pixel) set to zero."""
+    if held and params.grad is not None:
+        params.grad[:, [effect.param_names.index(name) for name in held]] = 0.0
 
 
 def _decay_learning_rate(optimizer: torch.optim.Optimizer, iteration: int) -> None:
@@ -203,6 +212,7 @@ def optimize(
             if settings.tv_weight > 0 and params.dim() == 4:
                 loss = loss + settings.tv_weight * total_variation(params)
             loss.backward()
+            _hold(params, effect, settings.held)
             optimizer.step()
             with torch.no_grad():
                 if params.dim() == 4 and iteration in SMOOTH_AT and iteration < settings.iterations:
@@ -255,9 +265,12 @@ def optimize_coarse_to_fine(
     init: torch.Tensor,
     levels: tuple[tuple[int, Settings], ...],
     on_step: Callable[[int, float, torch.Tensor], None] | None = None,
+    between_levels: Callable[[torch.Tensor], torch.Tensor] | None = None,
 ) -> Outcome:
     """:func:`optimize` on an image pyramid: each ``(reduction, settings)`` level works on the
-    images reduced by that factor and starts from the previous level's parameters.
+    images reduced by that factor and starts from the previous level's parameters
+    (``between_levels`` may change global ones before the next level starts, e.g.
+    :func:`wise.optimize.inversion.invert_steps` once descent has moved the rest).
 
     The effects are resolution-independent, so the parameters found on a small copy carry
     over; most iterations then cost a fraction of a full-resolution one. The last level
@@ -268,8 +281,10 @@ def optimize_coarse_to_fine(
     """
     params, losses, seconds = init, [], 0.0
     outcome, mode = None, "global"
-    for reduction, settings in levels:
+    for index, (reduction, settings) in enumerate(levels):
         mode = settings.mode
+        if index > 0 and between_levels is not None and params.dim() == 2:
+            params = between_levels(params.detach())
         if reduction > 1:
             size = (max(8, content.shape[-2] // reduction), max(8, content.shape[-1] // reduction))
             level_content = torch.nn.functional.interpolate(content, size=size, mode="area")
@@ -343,6 +358,7 @@ def optimize_on_crops(
             difference = region - target[..., top : top + crop, left : left + crop]
             loss = difference.abs().mean() if settings.loss == "l1" else difference.square().mean()
             loss.backward()
+            _hold(params, effect, settings.held)
             optimizer.step()
             with torch.no_grad():
                 params.clamp_(NORMALIZED_MIN, NORMALIZED_MAX)

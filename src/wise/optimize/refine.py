@@ -19,6 +19,7 @@ import torch.nn.functional as F
 
 from wise.effects.base import Effect
 from wise.errors import WiseError
+from wise.optimize.inversion import read_steps
 from wise.optimize.parametric import Outcome, Settings, optimize_coarse_to_fine
 
 LEVEL_SIDES = ((256, 0.7, 1.0), (512, 0.3, 0.5))
@@ -84,7 +85,10 @@ def refine(
     torch.optim.Adam([torch.zeros(1, requires_grad=True)])
     plan = _sides(content)
     per_level = MAX_LEVEL_ITERATIONS if max_iterations is None else max(1, math.ceil(max_iterations / len(plan)))
-    params = start
+    # the staircase parameters read off the example at the first level's size, within the budget
+    params, held = start, ()
+    if start.dim() <= 2:
+        params, held = read_steps(effect, content, target, start.reshape(1, -1), side=plan[0][0])
     losses: list[float] = []
     outcome: Outcome | None = None
     seconds_per_pixel = 0.0  # of an iteration and a render at the level before
@@ -103,6 +107,7 @@ def refine(
             levels=1,
             time_limit=left * share / sum(s for _, s, _ in plan[index:]),
             anneal=REFINE_ANNEAL if index == 0 else 0.0,
+            held=held,
         )
         small_content = F.interpolate(content, size=size, mode="area") if factor < 1 else content
         small_target = F.interpolate(target, size=size, mode="area") if factor < 1 else target
@@ -113,5 +118,5 @@ def refine(
         if outcome.interrupted:
             break
     if outcome is None:
-        return Outcome(params=start.detach().clone(), seconds=time.perf_counter() - began)
+        return Outcome(params=params.detach().clone(), seconds=time.perf_counter() - began)
     return replace(outcome, losses=losses, seconds=time.perf_counter() - began)

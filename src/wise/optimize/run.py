@@ -6,8 +6,9 @@ import json
 import math
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
-from typing import Sequence, TextIO
+from typing import Callable, Sequence, TextIO
 
 import torch
 import torch.nn.functional as F
@@ -18,6 +19,7 @@ from wise.errors import WiseError, size_text
 from wise.interrupt import ctrl_c
 from wise.io import atomic_path, read_image, tensor_to_image, write_image
 from wise.nst import check_builtin_style, stylize, stylize_gatys
+from wise.optimize.inversion import describe_estimates, inversion_between_levels, read_steps
 from wise.optimize.parametric import Outcome, Settings, describe_levels, optimize_coarse_to_fine, pyramid
 from wise.optimize.report import write_animation, write_report
 from wise.paramfile import load_params, save_params
@@ -157,7 +159,9 @@ def run(
             print(progress.line(iteration, loss, output), file=out, flush=True)
 
     with ctrl_c(out) as interruption:
-        outcome = optimize_coarse_to_fine(effect, content, target, start_params.to(device), levels, on_step)
+        start_params, between, held = _read_steps(effect, content, target, start_params.to(device), out)
+        levels = tuple((reduction, replace(level, held=held)) for reduction, level in levels)
+        outcome = optimize_coarse_to_fine(effect, content, target, start_params, levels, on_step, between)
         interruption.hold()
         if outcome.interrupted:
             print(
@@ -173,6 +177,24 @@ def run(
         file=out,
     )
     return outcome
+
+
+def _read_steps(
+    effect: Effect, content: torch.Tensor, target: torch.Tensor, start: torch.Tensor, out: TextIO
+) -> tuple[torch.Tensor, Callable[[torch.Tensor], torch.Tensor] | None, tuple[str, ...]]:
+    """The start with the staircase parameters read off the target (:mod:`wise.optimize.inversion`;
+    said on ``out``), the hook that reads them again between the levels, and the parameters
+    descent holds; for parameter masks the start values of every pixel."""
+    between = inversion_between_levels(effect, content, target)
+    if between is None or start.dim() > 2:  # masks given to start from are kept as they are
+        return start, None, ()
+    start = start.reshape(1, -1)
+    began = time.perf_counter()
+    read, held = read_steps(effect, content, target, start)
+    said = describe_estimates(effect, start, read)
+    if said is not None:
+        print(f"read off the target: {said} ({time.perf_counter() - began:.1f} s)", file=out, flush=True)
+    return read, between, held
 
 
 def _write_results(

@@ -1,0 +1,364 @@
+"""Step-like parameters read off the example in closed form, before gradient descent.
+
+Some parameters make a staircase of the look: the gradient of a loss with respect to them points
+nowhere useful until the steps line up, and descent settles in a local minimum (BENCHMARKS.md,
+"Inversion of the step parameters"). The example itself says where its steps are:
+
+- **cartoon** ``bins`` and ``softness``: the quantized luminance sits on plateaus at
+  ``(k + 1/2) / bins`` (:func:`wise.filters.quantize.quantize`), whatever the colour adjustments
+  before it did. The bin count is the period of the example's luminance histogram, the one whose
+  comb ``cos(2 pi (L bins - 1/2))`` the plateaus agree with most (:func:`plateau_bins`); how
+  sharply they agree gives the ramps' width (:func:`softness_from_agreement`).
+- **XDoG** ``contour``, ``blackness`` and ``shading``: outside the ink the drawing is the shading
+  ``1 - s (1 - L)`` of the abstracted luminance ``L``, a line in ``s``; the ink is where the
+  response ``u = u0 + contour u1`` of :func:`wise.effects.common.edge_response` lies below
+  ``blackness``. ``u0`` and ``u1`` are computed from the content once; for each ``contour`` of a
+  grid, ``blackness`` is the quantile of ``u`` at the example's ink share, and the contour whose
+  ink covers the example's best is kept (:func:`xdog_threshold_from_ink`).
+
+:func:`invert_steps` applies them to parameters ``(1, P)``; effects without such parameters are
+returned unchanged. The estimates read the other parameters (the colour adjustments, ``details``)
+where they stand: optimization calls it at the start and again once descent has moved them.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Callable
+
+import torch
+import torch.nn.functional as F
+
+from wise.effects.base import Effect
+from wise.effects.common import detail_sigmas, edge_response
+from wise.filters import rgb_to_lab
+from wise.filters.quantize import MIN_BINS
+from wise.params import NORMALIZED_MAX, NORMALIZED_MIN
+
+WORKING_SIDE = 512
+"""Short side at which the estimates are made (a larger example is reduced to it)."""
+BIN_STEP = 0.01
+"""Resolution of the bin count searched over the parameter's range."""
+HISTOGRAM_BINS = 2048
+"""Bins of the luminance histogram that the comb is scored on."""
+OUTLINE_DEPTH = 0.08
+"""A pixel darker than the brightest within two pixels by this much (L* / 100) lies on an
+outline or its antialiased border, not on a plateau: it is left out of the histogram."""
+CLIPPED = 1.0 / 255.0
+"""A colour channel this close to 0 or 1 was clipped on the way back to RGB, which moves its
+luminance off the plateau."""
+CLEAR_LEVELS = 2
+CLEAR_AGREEMENT = 0.5
+"""Plateaus on the comb of the best bin count, and its agreement, from which that count is taken
+without a search: two plateaus at their centres ``(k + 1/2) / b`` fix both the spacing and the offset."""
+LEVEL_SHARE = 0.02
+"""Share of the plateau pixels a level must hold to count as occupied."""
+REGRESSION_BIN_STEP = 0.05
+REGRESSION_SOFTNESS_VALUES = 11
+REGRESSION_PIXELS = 4096
+"""Grid and pixels of :func:`staircase_fit`, the bins and softness that map the content's
+abstracted luminance to the example's."""
+CONTOUR_CANDIDATES = 61
+"""Contour values tried over the parameter's range when reading the ink."""
+CLEAR_OVERLAP = 0.9
+"""Overlap of the ink drawn with the example's above which the threshold is taken as read."""
+TIED_OVERLAP = 1e-6
+"""Contours whose ink overlaps the example's within this much (pixel for pixel the same) mark it equally well."""
+INK = 0.5
+"""A pixel whose line factor (drawing over shading) is below this is ink."""
+SHADING_FIT = 0.03
+"""Pixels within this ratio of the fitted shading count as inliers of the shading fit."""
+
+
+# ----- cartoon: plateaus of the luminance ---------------------------------------------------
+
+
+def example_luminance(example: torch.Tensor) -> torch.Tensor:
+    """The normalized luminance (L* / 100) of ``example`` ``(1, 3, H, W)``, ``(1, 1, H, W)``."""
+    return rgb_to_lab(example.clamp(0.0, 1.0))[:, :1] / 100.0
+
+
+def plateau_pixels(example: torch.Tensor) -> torch.Tensor:
+    """``(1, 1, H, W)``: the pixels of ``example`` that lie on its quantized plateaus or ramps, not
+    on an outline, its border or a colour clipped on the way back to RGB."""
+    luminance = example_luminance(example)
+    brightest = F.max_pool2d(luminance, kernel_size=5, stride=1, padding=2)
+    clipped = ((example <= CLIPPED) | (example >= 1.0 - CLIPPED)).any(dim=1, keepdim=True)
+    return (brightest - luminance < OUTLINE_DEPTH) & ~clipped
+
+
+def plateau_luminance(example: torch.Tensor) -> torch.Tensor:
+    """The luminance of :func:`plateau_pixels`, flat."""
+    return example_luminance(example)[plateau_pixels(example)]
+
+
+def comb_agreement(luminance: torch.Tensor, bins: torch.Tensor) -> torch.Tensor:
+    """``mean(cos(2 pi (L b - 1/2)))`` for each bin count ``b``: 1 where every value sits on a level
+    centre ``(k + 1/2) / b``, about 0 for a count unrelated to the example's levels."""
+    counts = torch.histc(luminance.double(), HISTOGRAM_BINS, 0.0, 1.0)
+    centres = (torch.arange(HISTOGRAM_BINS, dtype=torch.float64) + 0.5) / HISTOGRAM_BINS
+    weights = counts / counts.sum().clamp_min(1.0)
+    phases = 2.0 * math.pi * (centres[None, :] * bins.double()[:, None] - 0.5)
+    return (torch.cos(phases) * weights[None, :]).sum(dim=1)
+
+
+def plateau_bins(luminance: torch.Tensor, low: float, high: float) -> tuple[list[float], list[float]]:
+    """The bin counts in ``[low, high]`` whose combs agree with ``luminance`` most, best first (at
+    most three local maxima within 0.8 of the best), and their agreements."""
+    grid = torch.arange(max(low, MIN_BINS), high + BIN_STEP / 2, BIN_STEP, dtype=torch.float64)
+    agreement = comb_agreement(luminance, grid)
+    padded = F.pad(agreement[None, None], (1, 1), value=-2.0)[0, 0]
+    peaks = ((agreement >= padded[:-2]) & (agreement >= padded[2:])).nonzero().flatten()
+    best = float(agreement.max())
+    ranked = sorted(peaks.tolist(), key=lambda i: -float(agreement[i]))
+    chosen = [i for i in ranked if float(agreement[i]) >= 0.8 * best][:3]
+    return [float(grid[i]) for i in chosen], [float(agreement[i]) for i in chosen]
+
+
+def softness_from_agreement(agreement: float, bins: float, low: float, high: float) -> float:
+    """The softness in ``[low, high]`` at which luminance spread evenly over [0, 1] and quantized
+    into ``bins`` gives ``agreement`` (it falls from 1 at 0 as the ramps widen)."""
+    from wise.filters.quantize import quantize
+
+    grid = torch.linspace(low, high, 201)
+    x = ((torch.arange(4000) + 0.5) / 4000).view(1, 1, 1, -1).expand(len(grid), 1, 1, -1)
+    levels = quantize(x, torch.full((len(grid),), bins), grid).view(len(grid), -1)
+    table = torch.cos(2.0 * math.pi * (levels * bins - 0.5)).mean(dim=1)
+    return float(grid[(table - agreement).abs().argmin()])
+
+
+def staircase_fit(
+    before: torch.Tensor, after: torch.Tensor, bins_range: tuple[float, float], softness_range: tuple[float, float]
+) -> tuple[float, float]:
+    """``(bins, softness)`` of the quantizer that maps the luminance ``before`` to ``after`` (flat,
+    the same pixels) with the least squared error, over a grid of both."""
+    from wise.filters.quantize import quantize
+
+    bins_grid = torch.arange(max(bins_range[0], MIN_BINS), bins_range[1] + 1e-6, REGRESSION_BIN_STEP)
+    softness_grid = torch.linspace(softness_range[0], softness_range[1], REGRESSION_SOFTNESS_VALUES)
+    bins = bins_grid.repeat_interleave(len(softness_grid))
+    softness = softness_grid.repeat(len(bins_grid))
+    stride = max(1, before.numel() // REGRESSION_PIXELS)
+    x, y = before[::stride].float(), after[::stride].float()
+    levels = quantize(x.clamp(0.0, 1.0).view(1, 1, 1, -1).expand(len(bins), 1, 1, -1), bins, softness)
+    errors = (levels.view(len(bins), -1) - y).square().mean(dim=1)
+    best = int(errors.argmin())
+    return float(bins[best]), float(softness[best])
+
+
+def _cartoon(
+    effect: Effect, content: torch.Tensor, example: torch.Tensor, params: torch.Tensor
+) -> tuple[torch.Tensor, bool]:
+    bins_spec, softness_spec = effect.spec("bins"), effect.spec("softness")
+    bins_range, softness_range = (bins_spec.min, bins_spec.max), (softness_spec.min, softness_spec.max)
+    kept = plateau_pixels(example)
+    if int(kept.sum()) < 64:  # nothing flat to read: an outline drawing or a blank example
+        return params, False
+    luminance = example_luminance(example)[kept]
+    found = []
+    candidates, agreements = plateau_bins(luminance, *bins_range)
+    for bins, agreement in zip(candidates, agreements):
+        softness = softness_from_agreement(agreement, bins, *softness_range)
+        found.append(_with(effect, params, bins=bins, softness=softness))
+    if occupied_levels(luminance, candidates[0]) >= CLEAR_LEVELS and agreements[0] >= CLEAR_AGREEMENT:
+        return found[0], True  # the period shows: plateaus so spaced and placed fit no other count
+    # one or two plateaus fit many periods: the content's abstracted luminance, mapped onto the
+    # example's by a staircase, is one more candidate, and the renders decide
+    p, ctx = effect.real_values(content, params)
+    abstracted, _ = effect.abstraction(content, p, ctx)
+    bins, softness = staircase_fit((abstracted[:, :1] / 100.0)[kept], luminance, bins_range, softness_range)
+    found.append(_with(effect, params, bins=bins, softness=softness))
+    return _closest(effect, content, example, found), False
+
+
+def occupied_levels(luminance: torch.Tensor, bins: float) -> int:
+    """How many of the levels ``(k + 1/2) / bins`` hold at least :data:`LEVEL_SHARE` of the
+    luminance values within a quarter of a level's width."""
+    position = luminance.double() * bins - 0.5
+    nearest = position.round()
+    near = (position - nearest).abs() < 0.25
+    counts = torch.bincount(nearest[near].clamp_min(0).long())
+    return int((counts >= LEVEL_SHARE * luminance.numel()).sum())
+
+
+# ----- XDoG: ink share and the edge response ------------------------------------------------
+
+
+def shading_from_example(drawing: torch.Tensor, luminance: torch.Tensor, low: float, high: float) -> float:
+    """The shading ``s`` in ``[low, high]`` of a drawing ``(1, 1, H, W)`` (grey) over the
+    abstracted luminance: the value whose shading ``1 - s (1 - L)`` most pixels follow within
+    :data:`SHADING_FIT` (the ink falls below it), refined by least squares on those pixels."""
+    darkness = 1.0 - luminance.clamp(0.0, 1.0)
+    grid = torch.linspace(low, high, 41)
+    shaded = 1.0 - grid.view(-1, 1, 1, 1) * darkness
+    inliers = ((drawing / shaded.clamp_min(1e-3) - 1.0).abs() < SHADING_FIT).flatten(1).sum(dim=1)
+    rough = grid[int(inliers.argmax())]
+    near = ((drawing / (1.0 - rough * darkness).clamp_min(1e-3) - 1.0).abs() < SHADING_FIT) & (darkness > 0.02)
+    if int(near.sum()) < 16:
+        return float(rough)
+    fitted = ((1.0 - drawing[near]) * darkness[near]).sum() / darkness[near].square().sum()
+    return float(fitted.clamp(low, high))
+
+
+def xdog_threshold_from_ink(
+    ink: torch.Tensor,
+    flat: torch.Tensor,
+    edges: torch.Tensor,
+    contours: torch.Tensor,
+    blackness_range: tuple[float, float],
+    current: float | None = None,
+) -> tuple[float, float, float]:
+    """``(contour, blackness, overlap)``: the response ``u = flat + contour * edges`` (each
+    ``(1, 1, H, W)``) thresholded at ``blackness`` marks the ink mask ``ink`` best (intersection
+    over union) among ``contours``, each with the blackness that gives the example's ink share
+    (a quantile of ``u``, clamped to ``blackness_range``). Of contours that mark it equally
+    well (the ink does not tell them apart), the one nearest ``current`` is kept."""
+    share = float(ink.float().mean())
+    if share == 0.0:
+        return float(contours[0]), blackness_range[0], -1.0
+    tried = []
+    for contour in contours.tolist():
+        response = (flat + contour * edges).flatten()
+        blackness = float(torch.quantile(response[:: max(1, response.numel() // 1_000_000)], share))
+        blackness = min(max(blackness, blackness_range[0]), blackness_range[1])
+        drawn = (response < blackness).view_as(ink)
+        overlap = float((drawn & ink).sum()) / max(1.0, float((drawn | ink).sum()))
+        tried.append((contour, blackness, overlap))
+    best = max(overlap for _, _, overlap in tried)
+    ties = [entry for entry in tried if entry[2] >= best - TIED_OVERLAP]
+    return min(ties, key=lambda entry: abs(entry[0] - (ties[0][0] if current is None else current)))
+
+
+def _xdog(
+    effect: Effect, content: torch.Tensor, example: torch.Tensor, params: torch.Tensor
+) -> tuple[torch.Tensor, bool]:
+    with torch.no_grad():
+        p, ctx = effect.real_values(content, params)
+        luminance, tangent = effect.abstraction(content, p, ctx)
+        smoothing = detail_sigmas(p["details"])["edge_smoothing"]
+        response = [
+            edge_response(luminance, tangent, p["stroke_width"], c, smoothing, effect.kernel_size, ctx.scale)
+            for c in (0.0, 1.0)
+        ]
+    drawing = example.mean(dim=1, keepdim=True)
+    shading_spec = effect.spec("shading")
+    shading = shading_from_example(drawing, luminance, shading_spec.min, shading_spec.max)
+    shaded = (1.0 - shading * (1.0 - luminance.clamp(0.0, 1.0))).clamp_min(1e-3)
+    ink = drawing / shaded < INK
+    contour_spec, blackness_spec = effect.spec("contour"), effect.spec("blackness")
+    contours = torch.linspace(contour_spec.min, contour_spec.max, CONTOUR_CANDIDATES)
+    contour, blackness, overlap = xdog_threshold_from_ink(
+        ink,
+        response[0],
+        response[1] - response[0],
+        contours,
+        (blackness_spec.min, blackness_spec.max),
+        current=float(p["contour"].mean()),
+    )
+    if overlap < 0:  # no ink: the lines are not there to read
+        return _with(effect, params, shading=shading), False
+    found = _with(effect, params, shading=shading, contour=contour, blackness=blackness)
+    return found, overlap >= CLEAR_OVERLAP
+
+
+# ----- shared -------------------------------------------------------------------------------
+
+
+INVERTED_PARAMS: dict[str, tuple[str, ...]] = {
+    "cartoon": ("bins", "softness"),
+    "xdog": ("contour", "blackness", "shading"),
+}
+"""The parameters each effect's estimate sets; the others are left where they stand."""
+
+HELD_PARAMS: dict[str, tuple[str, ...]] = {
+    "cartoon": ("bins",),
+    "xdog": ("contour", "blackness"),
+}
+"""Of those, the ones with no useful gradient: read clearly, descent holds them (the others,
+softness and shading, have a true gradient and are refined)."""
+
+_ESTIMATES: dict[str, Callable[[Effect, torch.Tensor, torch.Tensor, torch.Tensor], tuple[torch.Tensor, bool]]] = {
+    "cartoon": _cartoon,
+    "xdog": _xdog,
+}
+
+
+def _with(effect: Effect, params: torch.Tensor, **values: float) -> torch.Tensor:
+    """``params`` ``(1, P)`` with the named parameters set to real ``values`` (normalized, clamped)."""
+    changed = params.detach().clone()
+    for name, value in values.items():
+        normalized = effect.spec(name).to_normalized(value)
+        changed[0, effect.param_names.index(name)] = min(max(normalized, NORMALIZED_MIN), NORMALIZED_MAX)
+    return changed
+
+
+def _closest(effect: Effect, content: torch.Tensor, example: torch.Tensor, candidates: list[torch.Tensor]) -> torch.Tensor:
+    """The candidate whose render is closest to ``example`` (mean squared difference)."""
+    if len(candidates) == 1:
+        return candidates[0]
+    with torch.no_grad():
+        losses = [float((effect(content, c).clamp(0.0, 1.0) - example).square().mean()) for c in candidates]
+    return candidates[losses.index(min(losses))]
+
+
+def _working_copy(image: torch.Tensor, side: int) -> torch.Tensor:
+    short = min(image.shape[-2:])
+    if short <= side:
+        return image
+    factor = side / short
+    size = (max(8, round(image.shape[-2] * factor)), max(8, round(image.shape[-1] * factor)))
+    return F.interpolate(image, size=size, mode="area")
+
+
+def invertible(effect: Effect) -> bool:
+    """Whether :func:`invert_steps` estimates any of ``effect``'s parameters."""
+    return getattr(effect, "name", None) in _ESTIMATES
+
+
+def invert_steps(
+    effect: Effect, content: torch.Tensor, example: torch.Tensor, params: torch.Tensor, side: int = WORKING_SIDE
+) -> torch.Tensor:
+    """:func:`read_steps` without the names to hold."""
+    return read_steps(effect, content, example, params, side)[0]
+
+
+def read_steps(
+    effect: Effect, content: torch.Tensor, example: torch.Tensor, params: torch.Tensor, side: int = WORKING_SIDE
+) -> tuple[torch.Tensor, tuple[str, ...]]:
+    """``params`` (normalized ``(1, P)``) with the step-like parameters of ``effect`` read off
+    ``example``, the effect's rendering of ``content`` (both ``(1, 3, H, W)``, same size); the
+    others unchanged. An estimate the example shows clearly (several plateaus, ink drawn as the
+    example's) is taken; one it leaves open only where its render fits the example better.
+    Estimated on copies whose short side is ``side`` at most; without autograd. Returns the
+    parameters and, where the example showed them clearly, the staircase parameters
+    (:data:`HELD_PARAMS`) that descent should hold (:attr:`wise.optimize.parametric.Settings.held`)."""
+    estimate = _ESTIMATES.get(getattr(effect, "name", ""))  # a wrapped effect (a test's) has none
+    if estimate is None:
+        return params, ()
+    device = params.device
+    with torch.no_grad():
+        content, example = _working_copy(content.detach(), side), _working_copy(example.detach(), side).to(content)
+        given = params.detach().reshape(1, -1).to(content)
+        found, clear = estimate(effect, content, example, given)
+        if not clear:  # an estimate that the example leaves open must fit better than what was there
+            found = _closest(effect, content, example, [given, found])
+    held = HELD_PARAMS[effect.name] if clear else ()
+    return found.to(device=device, dtype=params.dtype).reshape(params.shape), held
+
+
+def inversion_between_levels(
+    effect: Effect, content: torch.Tensor, example: torch.Tensor
+) -> Callable[[torch.Tensor], torch.Tensor] | None:
+    """:func:`invert_steps` for ``content`` and ``example`` as a hook of
+    :func:`wise.optimize.parametric.optimize_coarse_to_fine`; None for an effect without estimates."""
+    if not invertible(effect):
+        return None
+    return lambda params: invert_steps(effect, content, example, params)
+
+
+def describe_estimates(effect: Effect, before: torch.Tensor, after: torch.Tensor) -> str | None:
+    """``"bins 4.02, softness 0.10"``: the parameters :func:`invert_steps` changed, in real
+    units; None when it changed none."""
+    old, new = effect.params_to_dict(before.reshape(-1)), effect.params_to_dict(after.reshape(-1))
+    changed = [f"{name} {new[name]:.2f}" for name in INVERTED_PARAMS.get(effect.name, ()) if new[name] != old[name]]
+    return ", ".join(changed) or None

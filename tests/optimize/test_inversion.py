@@ -1,0 +1,150 @@
+import math
+
+import pytest
+import torch
+import torch.nn.functional as F
+
+from wise import effects
+from wise.filters.quantize import quantize
+from wise.optimize.inversion import (
+    comb_agreement,
+    invert_steps,
+    inversion_between_levels,
+    plateau_bins,
+    softness_from_agreement,
+    staircase_fit,
+    xdog_threshold_from_ink,
+)
+from wise.optimize.parametric import Settings, optimize_coarse_to_fine
+
+
+def _with(effect, params: torch.Tensor, **values: float) -> torch.Tensor:
+    changed = params.clone()
+    for name, value in values.items():
+        changed[0, effect.param_names.index(name)] = effect.spec(name).to_normalized(value)
+    return changed
+
+
+def _real(effect, params: torch.Tensor, name: str) -> float:
+    return effect.params_to_dict(params[0])[name]
+
+
+def test_the_comb_of_the_true_bin_count_agrees_and_others_do_not() -> None:
+    x = torch.rand(20000, generator=torch.Generator().manual_seed(0))
+    levels = quantize(x.view(1, 1, 1, -1), 6.0).flatten()
+    agreement = comb_agreement(levels, torch.tensor([6.0, 5.0, 7.0, 4.0, 12.0]))
+    assert float(agreement[0]) == pytest.approx(1.0, abs=1e-3)  # up to the histogram's bin width
+    assert (agreement[1:] < 0.2).all()  # 12 bins: its centres miss every level of 6
+    found, _ = plateau_bins(levels, 2.0, 16.0)
+    assert found[0] == pytest.approx(6.0, abs=0.02)
+
+
+def test_the_ramps_width_follows_from_how_sharply_the_plateaus_agree() -> None:
+    x = torch.rand(40000, generator=torch.Generator().manual_seed(1))
+    for softness in (0.1, 0.3, 0.6):
+        levels = quantize(x.view(1, 1, 1, -1), 5.0, softness).flatten()
+        agreement = float(comb_agreement(levels, torch.tensor([5.0]))[0])
+        assert softness_from_agreement(agreement, 5.0, 0.0, 1.0) == pytest.approx(softness, abs=0.03)
+
+
+def test_the_staircase_is_fitted_from_the_luminance_before_and_after() -> None:
+    x = torch.rand(5000, generator=torch.Generator().manual_seed(2))
+    after = quantize(x.view(1, 1, 1, -1), 9.3, 0.4).flatten()
+    bins, softness = staircase_fit(x, after, (2.0, 16.0), (0.0, 1.0))
+    assert bins == pytest.approx(9.3, abs=0.03) and softness == pytest.approx(0.4, abs=0.01)
+
+
+def test_the_ink_threshold_comes_from_the_ink_share_and_the_response() -> None:
+    generator = torch.Generator().manual_seed(3)
+    flat = torch.rand(1, 1, 64, 64, generator=generator)
+    edges = torch.randn(1, 1, 64, 64, generator=generator) * 0.01
+    ink = flat + 1.5 * edges < 0.3
+    contour, blackness, overlap = xdog_threshold_from_ink(ink, flat, edges, torch.linspace(0, 3, 31), (0.01, 0.5))
+    assert contour == pytest.approx(1.5, abs=0.11) and blackness == pytest.approx(0.3, abs=0.01)
+    assert overlap > 0.95
+
+
+def test_cartoon_bins_and_softness_are_read_off_its_rendering(astronaut: torch.Tensor) -> None:
+    cartoon = effects.create("cartoon").eval()
+    content = F.interpolate(astronaut, size=(128, 128), mode="area")
+    truth = _with(cartoon, cartoon.default_params().reshape(1, -1), bins=4.0, softness=0.1)
+    with torch.no_grad():
+        example = cartoon(content, truth)
+    start = _with(cartoon, truth, bins=12.0, softness=0.8)  # far off, a staircase away
+    found = invert_steps(cartoon, content, example, start)
+    assert _real(cartoon, found, "bins") == pytest.approx(4.0, abs=0.15)
+    assert _real(cartoon, found, "softness") == pytest.approx(0.1, abs=0.1)
+    others = [i for i, name in enumerate(cartoon.param_names) if name not in ("bins", "softness")]
+    assert torch.equal(found[0, others], start[0, others])
+
+
+def test_xdog_threshold_and_shading_are_read_off_its_drawing(astronaut: torch.Tensor) -> None:
+    xdog = effects.create("xdog").eval()
+    content = F.interpolate(astronaut, size=(128, 128), mode="area")
+    truth = _with(xdog, xdog.default_params().reshape(1, -1), contour=2.0, blackness=0.3, shading=0.7)
+    with torch.no_grad():
+        example = xdog(content, truth)
+    start = _with(xdog, truth, contour=0.5, blackness=0.05, shading=0.1)
+    with torch.no_grad():
+        assert float((xdog(content, start) - example).abs().mean()) > 0.05
+    found = invert_steps(xdog, content, example, start)
+    for name, value, tolerance in (("blackness", 0.3, 0.03), ("shading", 0.7, 0.05)):
+        assert _real(xdog, found, name) == pytest.approx(value, abs=tolerance), name
+    # at 128 pixels contours from about 1.5 up draw the same ink: any of them is an answer
+    assert 1.2 <= _real(xdog, found, "contour") <= 2.2
+    with torch.no_grad():
+        assert float((xdog(content, found) - example).abs().mean()) < 0.002
+    assert _real(xdog, invert_steps(xdog, content, example, truth), "contour") == pytest.approx(2.0, abs=0.05)
+
+
+def test_an_estimate_that_fits_worse_is_not_taken(astronaut: torch.Tensor) -> None:
+    cartoon = effects.create("cartoon").eval()
+    content = F.interpolate(astronaut, size=(64, 64), mode="area")
+    noise = torch.rand(1, 3, 64, 64, generator=torch.Generator().manual_seed(4))  # no plateaus at all
+    start = cartoon.default_params().reshape(1, -1)
+    found = invert_steps(cartoon, content, noise, start)
+    with torch.no_grad():
+        before = float((cartoon(content, start) - noise).square().mean())
+        after = float((cartoon(content, found) - noise).square().mean())
+    assert after <= before
+
+
+def test_effects_without_estimates_are_left_alone(astronaut: torch.Tensor) -> None:
+    oil = effects.create("oilpaint").eval()
+    content = F.interpolate(astronaut, size=(32, 32), mode="area")
+    start = oil.default_params().reshape(1, -1)
+    assert invert_steps(oil, content, content, start) is start
+    assert inversion_between_levels(oil, content, content) is None
+
+
+def test_coarse_to_fine_reads_the_steps_again_between_levels(astronaut: torch.Tensor) -> None:
+    cartoon = effects.create("cartoon").eval()
+    content = F.interpolate(astronaut, size=(64, 64), mode="area")
+    start = cartoon.default_params().reshape(1, -1)
+    seen: list[torch.Tensor] = []
+
+    def hook(params: torch.Tensor) -> torch.Tensor:
+        seen.append(params)
+        return _with(cartoon, params, bins=3.0)
+
+    settings = Settings(mode="global", iterations=1, lr=0.01, loss="l2")
+    with torch.no_grad():
+        target = cartoon(content, start)
+    outcome = optimize_coarse_to_fine(cartoon, content, target, start, ((2, settings), (1, settings)), between_levels=hook)
+    assert len(seen) == 1 and seen[0].shape == (1, len(cartoon.param_names))
+    assert math.isclose(_real(cartoon, outcome.params, "bins"), 3.0, abs_tol=0.2)  # one small step from 3
+
+
+def test_descent_holds_the_parameters_read_off_the_example(astronaut: torch.Tensor) -> None:
+    from wise.optimize.parametric import optimize
+
+    cartoon = effects.create("cartoon").eval()
+    content = F.interpolate(astronaut, size=(48, 48), mode="area")
+    start = cartoon.default_params().reshape(1, -1)
+    with torch.no_grad():
+        target = cartoon(content, cartoon.preset("bold").reshape(1, -1))
+    settings = Settings(mode="global", iterations=3, lr=0.1, loss="l2", held=("bins", "contour"))
+    outcome = optimize(cartoon, content, target, start, settings)
+    held = [cartoon.param_names.index(name) for name in ("bins", "contour")]
+    assert torch.equal(outcome.params[0, held], start[0, held])
+    assert not torch.equal(outcome.params, start)  # the rest moved
