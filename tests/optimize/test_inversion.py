@@ -148,3 +148,17 @@ def test_descent_holds_the_parameters_read_off_the_example(astronaut: torch.Tens
     held = [cartoon.param_names.index(name) for name in ("bins", "contour")]
     assert torch.equal(outcome.params[0, held], start[0, held])
     assert not torch.equal(outcome.params, start)  # the rest moved
+
+
+def test_a_brief_descent_settles_between_candidates(astronaut: torch.Tensor) -> None:
+    from wise.optimize.inversion import best_after_brief_descent
+
+    cartoon = effects.create("cartoon").eval()
+    content = F.interpolate(astronaut, size=(64, 64), mode="area")
+    truth = _with(cartoon, cartoon.default_params().reshape(1, -1), bins=5.0, softness=0.1, saturation=2.0)
+    with torch.no_grad():
+        example = cartoon(content, truth)
+    # the right count with the colours off, and wrong counts with them right
+    candidates = [_with(cartoon, truth, bins=b) for b in (2.0, 12.0)] + [_with(cartoon, truth, saturation=1.0)]
+    best = best_after_brief_descent(cartoon, content, example, candidates)
+    assert _real(cartoon, best, "bins") == pytest.approx(5.0)

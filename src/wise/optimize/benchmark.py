@@ -96,7 +96,7 @@ def _trial(
     truth, reference = random_reference(effect, content, generator)
     start = effect.default_params() if predictor is None else predictor(content, reference)
     began = time.perf_counter()
-    start, held = read_steps(effect, content, reference, start.reshape(1, -1))
+    start, held = read_steps(effect, content, reference, start.reshape(1, -1), search=True)
     levels = tuple((reduction, replace(settings, held=held)) for reduction, settings in levels)
     crops = None if crops is None else replace(crops, held=held)
     between = inversion_between_levels(effect, content, reference)

@@ -24,6 +24,7 @@ where they stand: optimization calls it at the start and again once descent has 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 from typing import Callable
 
 import torch
@@ -33,6 +34,7 @@ from wise.effects.base import Effect
 from wise.effects.common import detail_sigmas, edge_response
 from wise.filters import rgb_to_lab
 from wise.filters.quantize import MIN_BINS
+from wise.optimize.parametric import Settings, optimize
 from wise.params import NORMALIZED_MAX, NORMALIZED_MIN
 
 WORKING_SIDE = 512
@@ -58,6 +60,12 @@ REGRESSION_SOFTNESS_VALUES = 11
 REGRESSION_PIXELS = 4096
 """Grid and pixels of :func:`staircase_fit`, the bins and softness that map the content's
 abstracted luminance to the example's."""
+SEARCHED_BINS = (2.0, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 12.0, 14.0, 16.0)
+"""Bin counts tried besides the estimates where the plateaus leave the count open."""
+SEARCH_SIDE = 128
+SEARCH_ITERATIONS = 20
+SEARCH_LR = 0.1
+"""The short discrete search: each candidate descended this often at this short side, at this rate."""
 CONTOUR_CANDIDATES = 61
 """Contour values tried over the parameter's range when reading the ink."""
 TIED_OVERLAP = 1e-6
@@ -70,6 +78,17 @@ INK = 0.5
 """A pixel whose line factor (drawing over shading) is below this is ink."""
 SHADING_FIT = 0.03
 """Pixels within this ratio of the fitted shading count as inliers of the shading fit."""
+
+
+@dataclass
+class Reading:
+    """What an effect's estimate read off an example: its best ``params`` ``(1, P)``, whether the
+    example showed them clearly (``clear``: then taken as they are), and where it left them
+    open, the ``candidates`` worth a brief descent each (:func:`read_steps` with ``search``)."""
+
+    params: torch.Tensor
+    clear: bool
+    candidates: list[torch.Tensor] = field(default_factory=list)
 
 
 # ----- cartoon: plateaus of the luminance ---------------------------------------------------
@@ -148,14 +167,12 @@ def staircase_fit(
     return float(bins[best]), float(softness[best])
 
 
-def _cartoon(
-    effect: Effect, content: torch.Tensor, example: torch.Tensor, params: torch.Tensor
-) -> tuple[torch.Tensor, bool]:
+def _cartoon(effect: Effect, content: torch.Tensor, example: torch.Tensor, params: torch.Tensor) -> Reading:
     bins_spec, softness_spec = effect.spec("bins"), effect.spec("softness")
     bins_range, softness_range = (bins_spec.min, bins_spec.max), (softness_spec.min, softness_spec.max)
     kept = plateau_pixels(example)
     if int(kept.sum()) < 64:  # nothing flat to read: an outline drawing or a blank example
-        return params, False
+        return Reading(params, False)
     luminance = example_luminance(example)[kept]
     found = []
     candidates, agreements = plateau_bins(luminance, *bins_range)
@@ -168,12 +185,14 @@ def _cartoon(
     if occupied_levels(luminance, candidates[0]) >= CLEAR_LEVELS and agreements[0] >= CLEAR_AGREEMENT:
         # the period shows: plateaus so spaced and placed fit no other count; the outlines,
         # read from darker pixels that may also be dark paint, only where they fit better
-        return _closest(effect, content, example, [found[0], _with(effect, found[0], **outlines)]), True
+        return Reading(_closest(effect, content, example, [found[0], _with(effect, found[0], **outlines)]), True)
     # one or two plateaus fit many periods: the content's abstracted luminance, mapped onto the
     # example's by a staircase, is one more candidate, and the renders decide
     bins, softness = staircase_fit((abstracted[:, :1] / 100.0)[kept], luminance, bins_range, softness_range)
     found.append(_with(effect, params, bins=bins, softness=softness))
-    return _closest(effect, content, example, [_with(effect, f, **outlines) for f in found]), False
+    found = [_with(effect, f, **outlines) for f in found]
+    others = [_with(effect, found[-1], bins=b) for b in SEARCHED_BINS if bins_range[0] <= b <= bins_range[1]]
+    return Reading(_closest(effect, content, example, found), False, found + others)
 
 
 def outline_ink(example: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -276,9 +295,7 @@ def xdog_threshold_from_ink(
     return min(ties, key=lambda entry: abs(entry[0] - (ties[0][0] if current is None else current)))
 
 
-def _xdog(
-    effect: Effect, content: torch.Tensor, example: torch.Tensor, params: torch.Tensor
-) -> tuple[torch.Tensor, bool]:
+def _xdog(effect: Effect, content: torch.Tensor, example: torch.Tensor, params: torch.Tensor) -> Reading:
     with torch.no_grad():
         p, ctx = effect.real_values(content, params)
         luminance, tangent = effect.abstraction(content, p, ctx)
@@ -303,11 +320,11 @@ def _xdog(
         current=float(p["contour"].mean()),
     )
     if overlap < 0:  # no ink: the lines are not there to read
-        return _with(effect, params, shading=shading), False
+        return Reading(_with(effect, params, shading=shading), False)
     # taken only where it fits better: read at the other parameters' current values, the ink can
     # be drawn by a threshold that descent must be free to leave (one trial of the benchmark: held,
     # 0.935 SSIM; free, 0.994)
-    return _with(effect, params, shading=shading, contour=contour, blackness=blackness), False
+    return Reading(_with(effect, params, shading=shading, contour=contour, blackness=blackness), False)
 
 
 # ----- shared -------------------------------------------------------------------------------
@@ -324,7 +341,7 @@ HELD_PARAMS: dict[str, tuple[str, ...]] = {"cartoon": ("bins",), "xdog": ()}
 a gradient once the steps line up (softness and shading everywhere, the soft threshold at the
 ink's border) and are refined."""
 
-_ESTIMATES: dict[str, Callable[[Effect, torch.Tensor, torch.Tensor, torch.Tensor], tuple[torch.Tensor, bool]]] = {
+_ESTIMATES: dict[str, Callable[[Effect, torch.Tensor, torch.Tensor, torch.Tensor], Reading]] = {
     "cartoon": _cartoon,
     "xdog": _xdog,
 }
@@ -370,7 +387,12 @@ def invert_steps(
 
 
 def read_steps(
-    effect: Effect, content: torch.Tensor, example: torch.Tensor, params: torch.Tensor, side: int = WORKING_SIDE
+    effect: Effect,
+    content: torch.Tensor,
+    example: torch.Tensor,
+    params: torch.Tensor,
+    side: int = WORKING_SIDE,
+    search: bool = False,
 ) -> tuple[torch.Tensor, tuple[str, ...]]:
     """``params`` (normalized ``(1, P)``) with the step-like parameters of ``effect`` read off
     ``example``, the effect's rendering of ``content`` (both ``(1, 3, H, W)``, same size); the
@@ -378,7 +400,9 @@ def read_steps(
     example's) is taken; one it leaves open only where its render fits the example better.
     Estimated on copies whose short side is ``side`` at most; without autograd. Returns the
     parameters and, where the example showed them clearly, the staircase parameters
-    (:data:`HELD_PARAMS`) that descent should hold (:attr:`wise.optimize.parametric.Settings.held`)."""
+    (:data:`HELD_PARAMS`) that descent should hold (:attr:`wise.optimize.parametric.Settings.held`).
+    With ``search``, an estimate the example leaves open is settled by a short discrete search:
+    each candidate descended briefly at :data:`SEARCH_SIDE` pixels, the best kept (seconds)."""
     estimate = _ESTIMATES.get(getattr(effect, "name", ""))  # a wrapped effect (a test's) has none
     if estimate is None:
         return params, ()
@@ -386,11 +410,32 @@ def read_steps(
     with torch.no_grad():
         content, example = _working_copy(content.detach(), side), _working_copy(example.detach(), side).to(content)
         given = params.detach().reshape(1, -1).to(content)
-        found, clear = estimate(effect, content, example, given)
-        if not clear:  # an estimate that the example leaves open must fit better than what was there
+        reading = estimate(effect, content, example, given)
+        found = reading.params
+        if not reading.clear:  # an estimate that the example leaves open must fit better than what was there
             found = _closest(effect, content, example, [given, found])
-    held = HELD_PARAMS[effect.name] if clear else ()
+    if not reading.clear and search and len(reading.candidates) > 1:
+        found = best_after_brief_descent(effect, content, example, [given, *reading.candidates])
+    held = HELD_PARAMS[effect.name] if reading.clear else ()
     return found.to(device=device, dtype=params.dtype).reshape(params.shape), held
+
+
+def best_after_brief_descent(
+    effect: Effect, content: torch.Tensor, example: torch.Tensor, candidates: list[torch.Tensor]
+) -> torch.Tensor:
+    """The candidate that, descended :data:`SEARCH_ITERATIONS` times on copies at
+    :data:`SEARCH_SIDE` pixels with its staircase parameters held, fits ``example`` best (the
+    candidate as it was, not as descended: the full descent follows)."""
+    small_content, small_example = _working_copy(content, SEARCH_SIDE), _working_copy(example, SEARCH_SIDE)
+    settings = Settings(
+        mode="global", iterations=SEARCH_ITERATIONS, lr=SEARCH_LR, loss="l2", held=HELD_PARAMS[effect.name]
+    )
+    losses = []
+    for candidate in candidates:
+        outcome = optimize(effect, small_content, small_example, candidate, settings)
+        with torch.no_grad():
+            losses.append(float((effect(small_content, outcome.params).clamp(0.0, 1.0) - small_example).square().mean()))
+    return candidates[losses.index(min(losses))]
 
 
 def inversion_between_levels(
