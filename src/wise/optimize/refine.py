@@ -37,6 +37,10 @@ REFINE_LR = 0.05
 refinement starts near the answer."""
 REFINE_ANNEAL = 0.3
 """Step temperature at the start of the coarsest level."""
+INVERSION_SIDE = 128
+"""Short side at which the staircase parameters are read off the example before the levels
+(:func:`wise.optimize.inversion.read_steps`): the luminance plateaus show at any size, and at
+128 pixels the reading costs about half a second of the budget (two seconds at 256)."""
 RENDER_SHARE = 1.5
 """An iteration and the level's final render take about this many iterations' time: a level
 starts only when that much of the budget is left (estimated from the level before, per pixel)."""
@@ -85,10 +89,10 @@ def refine(
     torch.optim.Adam([torch.zeros(1, requires_grad=True)])
     plan = _sides(content)
     per_level = MAX_LEVEL_ITERATIONS if max_iterations is None else max(1, math.ceil(max_iterations / len(plan)))
-    # the staircase parameters read off the example at the first level's size, within the budget
+    # the staircase parameters read off the example, within the budget
     params, held = start, ()
     if start.dim() <= 2:
-        params, held = read_steps(effect, content, target, start.reshape(1, -1), side=plan[0][0])
+        params, held = read_steps(effect, content, target, start.reshape(1, -1), side=INVERSION_SIDE)
     losses: list[float] = []
     outcome: Outcome | None = None
     seconds_per_pixel = 0.0  # of an iteration and a render at the level before
