@@ -18,6 +18,7 @@ from typing import TextIO
 import torch
 
 from wise import effects, metrics
+from wise.optimize.inversion import invert_steps, invertible
 from wise.optimize.refine import refine
 from wise.optimize.trials import PSNR_CAP, Column, mean_of, random_reference, run_trials
 from wise.ppn.predictor import Predictor
@@ -59,6 +60,12 @@ def bench_ppn(
             "true_params": effect.params_to_dict(truth[0]),
             "predicted_params": effect.params_to_dict(predicted[0]),
         }
+        if invertible(effect):
+            # the network's answer with the staircase parameters read off the example instead
+            read = invert_steps(effect, content, example, predicted)
+            row["read_ssim"], row["read_psnr"] = score(content, example, read)
+            row["read_param_l1"] = float((read - truth).abs().mean())
+            row["read_params"] = effect.params_to_dict(read[0])
         if refine_budget is not None:
             outcome = refine(effect, content, example, predicted, refine_budget)
             if outcome.interrupted:
@@ -94,6 +101,12 @@ def bench_ppn(
             "psnr_cap": PSNR_CAP,
             "trials": rows,
         }
+        if invertible(effect):
+            summary["read"] = {
+                "mean_ssim": mean_of(rows, "read_ssim"),
+                "mean_psnr": mean_of(rows, "read_psnr"),
+                "mean_param_l1": mean_of(rows, "read_param_l1"),
+            }
         if refine_budget is not None:
             summary["refined"] = {
                 "mean_ssim": mean_of(rows, "refined_ssim"),
@@ -107,6 +120,13 @@ def bench_ppn(
                 f"{summary['seconds_per_prediction']:.3f} s per prediction",
                 file=out,
             )
+            if "read" in summary:
+                read = summary["read"]
+                print(
+                    f"with the staircase read off the example: mean SSIM {read['mean_ssim']:.4f}, "
+                    f"mean PSNR {read['mean_psnr']:.2f} dB, mean parameter L1 {read['mean_param_l1']:.4f}",
+                    file=out,
+                )
             if refine_budget is not None:
                 refined = summary["refined"]
                 print(
@@ -117,6 +137,8 @@ def bench_ppn(
         return summary
 
     columns = [Column("SSIM", "ssim"), Column("PSNR", "psnr", ".2f"), Column("param L1", "param_l1")]
+    if invertible(effect):
+        columns += [Column("read SSIM", "read_ssim"), Column("read param L1", "read_param_l1")]
     if refine_budget is not None:
         columns += [Column("refined SSIM", "refined_ssim"), Column("refined PSNR", "refined_psnr", ".2f")]
     return run_trials(images_dir, trials, size, seed, trial, columns, summarize, json_path, out)

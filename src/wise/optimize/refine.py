@@ -41,6 +41,8 @@ INVERSION_SIDE = 128
 """Short side at which the staircase parameters are read off the example before the levels
 (:func:`wise.optimize.inversion.read_steps`): the luminance plateaus show at any size, and at
 128 pixels the reading costs about half a second of the budget (two seconds at 256)."""
+INVERSION_MIN_BUDGET = 2.0
+"""Budgets below this many seconds go to descent alone: the reading would take a quarter or more."""
 RENDER_SHARE = 1.5
 """An iteration and the level's final render take about this many iterations' time: a level
 starts only when that much of the budget is left (estimated from the level before, per pixel)."""
@@ -91,7 +93,7 @@ def refine(
     per_level = MAX_LEVEL_ITERATIONS if max_iterations is None else max(1, math.ceil(max_iterations / len(plan)))
     # the staircase parameters read off the example, within the budget
     params, held = start, ()
-    if start.dim() <= 2:
+    if start.dim() <= 2 and budget >= INVERSION_MIN_BUDGET:
         params, held = read_steps(effect, content, target, start.reshape(1, -1), side=INVERSION_SIDE)
     losses: list[float] = []
     outcome: Outcome | None = None
