@@ -29,6 +29,15 @@ def _real(effect, params: torch.Tensor, name: str) -> float:
     return effect.params_to_dict(params[0])[name]
 
 
+def _example(astronaut: torch.Tensor, name: str, side: int, **truth: float):
+    """The effect, the photo at ``side`` pixels, parameters with ``truth`` set and their rendering."""
+    effect = effects.create(name).eval()
+    content = F.interpolate(astronaut, size=(side, side), mode="area")
+    params = _with(effect, effect.default_params().reshape(1, -1), **truth)
+    with torch.no_grad():
+        return effect, content, params, effect(content, params)
+
+
 def test_the_comb_of_the_true_bin_count_agrees_and_others_do_not() -> None:
     x = torch.rand(20000, generator=torch.Generator().manual_seed(0))
     levels = quantize(x.view(1, 1, 1, -1), 6.0).flatten()
@@ -65,11 +74,7 @@ def test_the_ink_threshold_comes_from_the_ink_share_and_the_response() -> None:
 
 
 def test_cartoon_bins_and_softness_are_read_off_its_rendering(astronaut: torch.Tensor) -> None:
-    cartoon = effects.create("cartoon").eval()
-    content = F.interpolate(astronaut, size=(128, 128), mode="area")
-    truth = _with(cartoon, cartoon.default_params().reshape(1, -1), bins=4.0, softness=0.1)
-    with torch.no_grad():
-        example = cartoon(content, truth)
+    cartoon, content, truth, example = _example(astronaut, "cartoon", 128, bins=4.0, softness=0.1)
     start = _with(cartoon, truth, bins=12.0, softness=0.8)  # far off, a staircase away
     found = invert_steps(cartoon, content, example, start)
     assert _real(cartoon, found, "bins") == pytest.approx(4.0, abs=0.15)
@@ -79,11 +84,7 @@ def test_cartoon_bins_and_softness_are_read_off_its_rendering(astronaut: torch.T
 
 
 def test_xdog_threshold_and_shading_are_read_off_its_drawing(astronaut: torch.Tensor) -> None:
-    xdog = effects.create("xdog").eval()
-    content = F.interpolate(astronaut, size=(128, 128), mode="area")
-    truth = _with(xdog, xdog.default_params().reshape(1, -1), contour=2.0, blackness=0.3, shading=0.7)
-    with torch.no_grad():
-        example = xdog(content, truth)
+    xdog, content, truth, example = _example(astronaut, "xdog", 128, contour=2.0, blackness=0.3, shading=0.7)
     start = _with(xdog, truth, contour=0.5, blackness=0.05, shading=0.1)
     with torch.no_grad():
         assert float((xdog(content, start) - example).abs().mean()) > 0.05
@@ -153,11 +154,7 @@ def test_descent_holds_the_parameters_read_off_the_example(astronaut: torch.Tens
 def test_a_brief_descent_settles_between_candidates(astronaut: torch.Tensor) -> None:
     from wise.optimize.inversion import best_after_brief_descent
 
-    cartoon = effects.create("cartoon").eval()
-    content = F.interpolate(astronaut, size=(64, 64), mode="area")
-    truth = _with(cartoon, cartoon.default_params().reshape(1, -1), bins=5.0, softness=0.1, saturation=2.0)
-    with torch.no_grad():
-        example = cartoon(content, truth)
+    cartoon, content, truth, example = _example(astronaut, "cartoon", 64, bins=5.0, softness=0.1, saturation=2.0)
     # the right count with the colours off, and wrong counts with them right
     candidates = [_with(cartoon, truth, bins=b) for b in (2.0, 12.0)] + [_with(cartoon, truth, saturation=1.0)]
     best = best_after_brief_descent(cartoon, content, example, candidates)
