@@ -16,10 +16,10 @@ from PIL import Image
 from skimage import data
 
 import wise
-from wise.optimize.inversion import INVERTED_PARAMS
 from tests.cli.helpers import run_in_process
 from wise import ppn
 from wise.io import read_image
+from wise.optimize.inversion import INVERTED_PARAMS
 from wise.optimize.trials import content_at, random_reference
 from wise.ppn.modelfile import ModelInfo, save_model
 from wise.ppn.predictor import Predictor

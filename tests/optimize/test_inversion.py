@@ -8,8 +8,8 @@ from wise import effects
 from wise.filters.quantize import quantize
 from wise.optimize.inversion import (
     comb_agreement,
-    invert_steps,
     inversion_between_levels,
+    invert_steps,
     plateau_bins,
     softness_from_agreement,
     staircase_fit,
@@ -131,7 +131,9 @@ def test_coarse_to_fine_reads_the_steps_again_between_levels(astronaut: torch.Te
     settings = Settings(mode="global", iterations=1, lr=0.01, loss="l2")
     with torch.no_grad():
         target = cartoon(content, start)
-    outcome = optimize_coarse_to_fine(cartoon, content, target, start, ((2, settings), (1, settings)), between_levels=hook)
+    outcome = optimize_coarse_to_fine(
+        cartoon, content, target, start, ((2, settings), (1, settings)), between_levels=hook
+    )
     assert len(seen) == 1 and seen[0].shape == (1, len(cartoon.param_names))
     assert math.isclose(_real(cartoon, outcome.params, "bins"), 3.0, abs_tol=0.2)  # one small step from 3
 

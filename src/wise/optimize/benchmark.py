@@ -22,6 +22,7 @@ import torch
 from wise import effects, metrics
 from wise.effects.base import Effect
 from wise.errors import WiseError
+from wise.optimize.inversion import inversion_between_levels, read_steps
 from wise.optimize.parametric import (
     CROP_SIZE,
     Outcome,
@@ -31,7 +32,6 @@ from wise.optimize.parametric import (
     optimize_on_crops,
     pyramid,
 )
-from wise.optimize.inversion import inversion_between_levels, read_steps
 from wise.optimize.search import coordinate_search
 from wise.optimize.trials import PSNR_CAP, Column, mean_of, random_reference, run_trials
 from wise.ppn.predictor import Predictor

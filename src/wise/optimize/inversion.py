@@ -217,7 +217,8 @@ def _outline_threshold(
     edge response of the abstracted ``luminance`` (empty where no outline shows)."""
     smoothing = detail_sigmas(p["details"])["edge_smoothing"]
     flat, sharpened = (
-        edge_response(luminance, tangent, p["stroke_width"], c, smoothing, effect.kernel_size, scale) for c in (0.0, 1.0)
+        edge_response(luminance, tangent, p["stroke_width"], c, smoothing, effect.kernel_size, scale)
+        for c in (0.0, 1.0)
     )
     ink, visible = outline_ink(example)
     contour_spec, blackness_spec = effect.spec("contour"), effect.spec("blackness")
@@ -356,7 +357,9 @@ def _with(effect: Effect, params: torch.Tensor, **values: float) -> torch.Tensor
     return changed
 
 
-def _closest(effect: Effect, content: torch.Tensor, example: torch.Tensor, candidates: list[torch.Tensor]) -> torch.Tensor:
+def _closest(
+    effect: Effect, content: torch.Tensor, example: torch.Tensor, candidates: list[torch.Tensor]
+) -> torch.Tensor:
     """The candidate whose render is closest to ``example`` (mean squared difference)."""
     if len(candidates) == 1:
         return candidates[0]
@@ -434,7 +437,9 @@ def best_after_brief_descent(
     for candidate in candidates:
         outcome = optimize(effect, small_content, small_example, candidate, settings)
         with torch.no_grad():
-            losses.append(float((effect(small_content, outcome.params).clamp(0.0, 1.0) - small_example).square().mean()))
+            losses.append(
+                float((effect(small_content, outcome.params).clamp(0.0, 1.0) - small_example).square().mean())
+            )
     return candidates[losses.index(min(losses))]
 
 
