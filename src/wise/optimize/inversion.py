@@ -14,11 +14,14 @@ nowhere useful until the steps line up, and descent settles in a local minimum (
   response ``u = u0 + contour u1`` of :func:`wise.effects.common.edge_response` lies below
   ``blackness``. ``u0`` and ``u1`` are computed from the content once; for each ``contour`` of a
   grid, ``blackness`` is the quantile of ``u`` at the example's ink share, and the contour whose
-  ink covers the example's best is kept (:func:`xdog_threshold_from_ink`).
+  ink covers the example's best is kept (:func:`xdog_threshold_from_ink`). A cartoon's outlines
+  are read the same way, its ink being the pixels much darker than the colour around them.
 
-:func:`invert_steps` applies them to parameters ``(1, P)``; effects without such parameters are
+:func:`read_steps` applies them to parameters ``(1, P)``; effects without such parameters are
 returned unchanged. The estimates read the other parameters (the colour adjustments, ``details``)
-where they stand: optimization calls it at the start and again once descent has moved them.
+where they stand: optimization calls it at the start and again between its levels, once descent
+has moved them. A bin count the plateaus show clearly is held during descent; one they leave
+open is settled by a short discrete search (each candidate descended briefly on a small copy).
 """
 
 from __future__ import annotations
@@ -106,11 +109,6 @@ def plateau_pixels(example: torch.Tensor) -> torch.Tensor:
     brightest = F.max_pool2d(luminance, kernel_size=5, stride=1, padding=2)
     clipped = ((example <= CLIPPED) | (example >= 1.0 - CLIPPED)).any(dim=1, keepdim=True)
     return (brightest - luminance < OUTLINE_DEPTH) & ~clipped
-
-
-def plateau_luminance(example: torch.Tensor) -> torch.Tensor:
-    """The luminance of :func:`plateau_pixels`, flat."""
-    return example_luminance(example)[plateau_pixels(example)]
 
 
 def comb_agreement(luminance: torch.Tensor, bins: torch.Tensor) -> torch.Tensor:
