@@ -36,7 +36,7 @@ import torch.nn.functional as F
 from wise.effects.base import Effect
 from wise.effects.common import detail_sigmas, edge_response
 from wise.filters import rgb_to_lab
-from wise.filters.quantize import MIN_BINS
+from wise.filters.quantize import MIN_BINS, quantize
 from wise.optimize.parametric import Settings, optimize
 from wise.params import NORMALIZED_MAX, NORMALIZED_MIN
 
@@ -137,8 +137,6 @@ def plateau_bins(luminance: torch.Tensor, low: float, high: float) -> tuple[list
 def softness_from_agreement(agreement: float, bins: float, low: float, high: float) -> float:
     """The softness in ``[low, high]`` at which luminance spread evenly over [0, 1] and quantized
     into ``bins`` gives ``agreement`` (it falls from 1 at 0 as the ramps widen)."""
-    from wise.filters.quantize import quantize
-
     grid = torch.linspace(low, high, 201)
     x = ((torch.arange(4000) + 0.5) / 4000).view(1, 1, 1, -1).expand(len(grid), 1, 1, -1)
     levels = quantize(x, torch.full((len(grid),), bins), grid).view(len(grid), -1)
@@ -151,8 +149,6 @@ def staircase_fit(
 ) -> tuple[float, float]:
     """``(bins, softness)`` of the quantizer that maps the luminance ``before`` to ``after`` (flat,
     the same pixels) with the least squared error, over a grid of both."""
-    from wise.filters.quantize import quantize
-
     bins_grid = torch.arange(max(bins_range[0], MIN_BINS), bins_range[1] + 1e-6, REGRESSION_BIN_STEP)
     softness_grid = torch.linspace(softness_range[0], softness_range[1], REGRESSION_SOFTNESS_VALUES)
     bins = bins_grid.repeat_interleave(len(softness_grid))
