@@ -48,6 +48,11 @@ def test_the_comb_of_the_true_bin_count_agrees_and_others_do_not() -> None:
     assert found[0] == pytest.approx(6.0, abs=0.02)
 
 
+def test_a_luminance_that_no_comb_fits_still_gives_one_candidate() -> None:
+    found, agreements = plateau_bins(torch.zeros(100), 2.0, 16.0)  # black: every comb disagrees
+    assert len(found) == 1 and agreements[0] < 0
+
+
 def test_the_ramps_width_follows_from_how_sharply_the_plateaus_agree() -> None:
     x = torch.rand(40000, generator=torch.Generator().manual_seed(1))
     for softness in (0.1, 0.3, 0.6):

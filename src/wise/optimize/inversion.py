@@ -130,7 +130,7 @@ def plateau_bins(luminance: torch.Tensor, low: float, high: float) -> tuple[list
     peaks = ((agreement >= padded[:-2]) & (agreement >= padded[2:])).nonzero().flatten()
     best = float(agreement.max())
     ranked = sorted(peaks.tolist(), key=lambda i: -float(agreement[i]))
-    chosen = [i for i in ranked if float(agreement[i]) >= 0.8 * best][:3]
+    chosen = [i for i in ranked if float(agreement[i]) >= 0.8 * best][:3] or ranked[:1]  # best <= 0: no comb fits
     return [float(grid[i]) for i in chosen], [float(agreement[i]) for i in chosen]
 
 
