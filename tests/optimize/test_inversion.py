@@ -16,6 +16,7 @@ from wise.optimize.inversion import (
     xdog_threshold_from_ink,
 )
 from wise.optimize.parametric import Settings, optimize_coarse_to_fine
+from wise.train.procedural import dead_leaves
 
 
 def _with(effect, params: torch.Tensor, **values: float) -> torch.Tensor:
@@ -166,3 +167,25 @@ def test_a_brief_descent_settles_between_candidates(astronaut: torch.Tensor) -> 
     candidates = [_with(cartoon, truth, bins=b) for b in (2.0, 12.0)] + [_with(cartoon, truth, saturation=1.0)]
     best = best_after_brief_descent(cartoon, content, example, candidates)
     assert _real(cartoon, best, "bins") == pytest.approx(5.0)
+
+
+def test_the_bin_count_alone_is_read_within_a_quarter_on_photos_and_generated_pictures() -> None:
+    from skimage import data
+
+    effect = effects.create("cartoon").eval()
+    generator = torch.Generator().manual_seed(3)
+    photos = [torch.from_numpy(data.coffee()), torch.from_numpy(data.chelsea())]
+    photos = [photo.permute(2, 0, 1)[None].float() / 255.0 for photo in photos]
+    photos = [F.interpolate(photo, scale_factor=160 / min(photo.shape[-2:]), mode="area") for photo in photos]
+    bins_values = torch.linspace(2.0, 16.0, 12)[torch.randperm(12, generator=generator)]
+    hits = []
+    for trial, bins in enumerate(bins_values.tolist()):
+        content = dead_leaves(160, generator) if trial % 3 == 2 else photos[trial % 3]
+        softness = float(torch.rand(1, generator=generator))
+        truth = _with(effect, effect.default_params().reshape(1, -1), bins=bins, softness=softness)
+        with torch.no_grad():
+            example = effect(content, truth)
+        start = _with(effect, truth, bins=8.0, softness=0.3)
+        read = _real(effect, invert_steps(effect, content, example, start), "bins")
+        hits.append(abs(read - bins) <= 0.25)
+    assert sum(hits) >= 11, f"bins read within 0.25 in {sum(hits)} of {len(hits)} examples"

@@ -46,16 +46,23 @@ BIN_STEP = 0.01
 """Resolution of the bin count searched over the parameter's range."""
 HISTOGRAM_BINS = 2048
 """Bins of the luminance histogram that the comb is scored on."""
-OUTLINE_DEPTH = 0.08
-"""A pixel darker than the brightest within two pixels by this much (L* / 100) lies on an
-outline or its antialiased border, not on a plateau: it is left out of the histogram."""
+SOFTNESS_TABLE_VALUES = 8192
+"""Evenly spread luminance values that tabulate the comb's agreement against the softness (a
+few per histogram bin, or the table's own sampling would show in the agreement)."""
+OUTLINE_DEPTH = 0.01
+"""A pixel this much (L* / 100) below the closing of the luminance lies on an outline or its
+antialiased border, not on a plateau: it is left out of the histogram."""
+END_TOLERANCE = 1e-3
+"""Luminance (L* / 100) within which a pixel counts as lying at the example's darkest or brightest value."""
 CLIPPED = 1.0 / 255.0
 """A colour channel this close to 0 or 1 was clipped on the way back to RGB, which moves its
 luminance off the plateau."""
-CLEAR_LEVELS = 2
+CLEAR_LEVELS = 3
 CLEAR_AGREEMENT = 0.5
 """Plateaus on the comb of the best bin count, and its agreement, from which that count is taken
-without a search: two plateaus at their centres ``(k + 1/2) / b`` fix both the spacing and the offset."""
+without comparing renders: three plateaus at their centres ``(k + 1/2) / b`` fix the spacing
+and the offset (two fit several counts: 2.18 for levels of 13.45 in a trial of
+``benchmarks/bench_bins.py``)."""
 LEVEL_SHARE = 0.02
 """Share of the plateau pixels a level must hold to count as occupied."""
 REGRESSION_BIN_STEP = 0.05
@@ -104,21 +111,59 @@ def example_luminance(example: torch.Tensor) -> torch.Tensor:
 
 def plateau_pixels(example: torch.Tensor) -> torch.Tensor:
     """``(1, 1, H, W)``: the pixels of ``example`` that lie on its quantized plateaus or ramps, not
-    on an outline, its border or a colour clipped on the way back to RGB."""
+    on an outline, its border or a colour clipped on the way back to RGB. An outline is a thin
+    valley of the luminance, which a closing (the brightest, then the darkest within
+    :data:`OUTLINE_REACH` pixels) fills; a step between two levels it keeps."""
     luminance = example_luminance(example)
-    brightest = F.max_pool2d(luminance, kernel_size=5, stride=1, padding=2)
+    width = 2 * OUTLINE_REACH + 1
+    dilated = F.max_pool2d(luminance, kernel_size=width, stride=1, padding=OUTLINE_REACH)
+    closed = -F.max_pool2d(-dilated, kernel_size=width, stride=1, padding=OUTLINE_REACH)
     clipped = ((example <= CLIPPED) | (example >= 1.0 - CLIPPED)).any(dim=1, keepdim=True)
-    return (brightest - luminance < OUTLINE_DEPTH) & ~clipped
+    return (closed - luminance < OUTLINE_DEPTH) & ~clipped
+
+
+def clamped_ends(luminance: torch.Tensor, kept: torch.Tensor) -> torch.Tensor:
+    """The pixels at the darkest and the brightest value among ``kept`` (within
+    :data:`END_TOLERANCE`): content clamped to black or white before quantization, which the
+    soft ramps map to their outer ends ``Q(0)`` and ``Q(1)``, off the level centres."""
+    values = luminance[kept]
+    if values.numel() == 0:
+        return torch.zeros_like(kept)
+    low, high = float(values.min()), float(values.max())
+    return (luminance < low + END_TOLERANCE) | (luminance > high - END_TOLERANCE)
 
 
 def comb_agreement(luminance: torch.Tensor, bins: torch.Tensor) -> torch.Tensor:
-    """``mean(cos(2 pi (L b - 1/2)))`` for each bin count ``b``: 1 where every value sits on a level
-    centre ``(k + 1/2) / b``, about 0 for a count unrelated to the example's levels."""
+    """How well the levels ``(k + 1/2) / b`` describe the histogram of ``luminance``, for each bin
+    count ``b``: the comb ``cos(2 pi (L b - 1/2))`` summed over the histogram less its mean over
+    one period ``1/b`` around each value (so the spread of the content's own tones, which varies
+    slowly, does not count). 1 where every value sits on a level centre, about 0 for a count
+    unrelated to the example's levels."""
+    return _comb(_histogram(luminance)[None], bins)[0]
+
+
+def _histogram(luminance: torch.Tensor) -> torch.Tensor:
     counts = torch.histc(luminance.double(), HISTOGRAM_BINS, 0.0, 1.0)
-    centres = (torch.arange(HISTOGRAM_BINS, dtype=torch.float64) + 0.5) / HISTOGRAM_BINS
-    weights = counts / counts.sum().clamp_min(1.0)
-    phases = 2.0 * math.pi * (centres[None, :] * bins.double()[:, None] - 0.5)
-    return (torch.cos(phases) * weights[None, :]).sum(dim=1)
+    return counts / counts.sum().clamp_min(1.0)
+
+
+def _comb(weights: torch.Tensor, bins: torch.Tensor) -> torch.Tensor:
+    """:func:`comb_agreement` of histograms ``weights`` ``(R, HISTOGRAM_BINS)`` for the counts
+    ``bins`` ``(G,)``: ``(R, G)``."""
+    rows = weights.shape[0]
+    cumulative = F.pad(weights.cumsum(1), (1, 0))
+    centres = torch.arange(HISTOGRAM_BINS, dtype=torch.float64) + 0.5
+    half = HISTOGRAM_BINS / (2.0 * bins.double()[:, None])
+
+    def mass_below(position: torch.Tensor) -> torch.Tensor:  # (G, N) -> (R, G, N)
+        position = position.clamp(0.0, float(HISTOGRAM_BINS))
+        low = position.floor().long().clamp_max(HISTOGRAM_BINS - 1)
+        gathered = cumulative[:, low.flatten()].view(rows, *low.shape)
+        return gathered + (position - low) * weights[:, low.flatten()].view(rows, *low.shape)
+
+    envelope = (mass_below(centres + half) - mass_below(centres - half)) / (2.0 * half)
+    phases = 2.0 * math.pi * (centres[None, :] / HISTOGRAM_BINS * bins.double()[:, None] - 0.5)
+    return (torch.cos(phases) * (weights[:, None, :] - envelope)).sum(dim=2)
 
 
 def plateau_bins(luminance: torch.Tensor, low: float, high: float) -> tuple[list[float], list[float]]:
@@ -137,10 +182,13 @@ def plateau_bins(luminance: torch.Tensor, low: float, high: float) -> tuple[list
 def softness_from_agreement(agreement: float, bins: float, low: float, high: float) -> float:
     """The softness in ``[low, high]`` at which luminance spread evenly over [0, 1] and quantized
     into ``bins`` gives ``agreement`` (it falls from 1 at 0 as the ramps widen)."""
-    grid = torch.linspace(low, high, 201)
-    x = ((torch.arange(4000) + 0.5) / 4000).view(1, 1, 1, -1).expand(len(grid), 1, 1, -1)
-    levels = quantize(x, torch.full((len(grid),), bins), grid).view(len(grid), -1)
-    table = torch.cos(2.0 * math.pi * (levels * bins - 0.5)).mean(dim=1)
+    grid = torch.linspace(low, high, 101)
+    x = ((torch.arange(SOFTNESS_TABLE_VALUES) + 0.5) / SOFTNESS_TABLE_VALUES).view(1, 1, 1, -1)
+    levels = quantize(x.expand(len(grid), 1, 1, -1), torch.full((len(grid),), bins), grid).view(len(grid), -1)
+    index = (levels.double().clamp(0.0, 1.0) * HISTOGRAM_BINS).long().clamp_max(HISTOGRAM_BINS - 1)
+    index += HISTOGRAM_BINS * torch.arange(len(grid))[:, None]
+    counts = torch.bincount(index.flatten(), minlength=len(grid) * HISTOGRAM_BINS).view(len(grid), -1).double()
+    table = _comb(counts / counts.sum(dim=1, keepdim=True), torch.tensor([bins]))[:, 0]
     return float(grid[(table - agreement).abs().argmin()])
 
 
@@ -167,6 +215,9 @@ def _cartoon(effect: Effect, content: torch.Tensor, example: torch.Tensor, param
     kept = plateau_pixels(example)
     if int(kept.sum()) < 64:  # nothing flat to read: an outline drawing or a blank example
         return Reading(params, False)
+    kept &= ~clamped_ends(example_luminance(example), kept)
+    if int(kept.sum()) < 64:
+        return Reading(params, False)
     luminance = example_luminance(example)[kept]
     found = []
     candidates, agreements = plateau_bins(luminance, *bins_range)
@@ -180,13 +231,16 @@ def _cartoon(effect: Effect, content: torch.Tensor, example: torch.Tensor, param
         # the period shows: plateaus so spaced and placed fit no other count; the outlines,
         # read from darker pixels that may also be dark paint, only where they fit better
         return Reading(_closest(effect, content, example, [found[0], _with(effect, found[0], **outlines)]), True)
-    # one or two plateaus fit many periods: the content's abstracted luminance, mapped onto the
-    # example's by a staircase, is one more candidate, and the renders decide
+    # two plateaus fit many periods: the content's abstracted luminance, mapped onto the
+    # example's by a staircase, is one more candidate, and the renders decide, at the outlines as
+    # they stand, then with the outlines read (read wrongly, they would spoil every comparison)
     bins, softness = staircase_fit((abstracted[:, :1] / 100.0)[kept], luminance, bins_range, softness_range)
     found.append(_with(effect, params, bins=bins, softness=softness))
-    found = [_with(effect, f, **outlines) for f in found]
+    steps = _closest(effect, content, example, found)
+    best = _closest(effect, content, example, [steps, _with(effect, steps, **outlines)])
+    found = [_with(effect, best, **_real(effect, f, "bins", "softness")) for f in found]
     others = [_with(effect, found[-1], bins=b) for b in SEARCHED_BINS if bins_range[0] <= b <= bins_range[1]]
-    return Reading(_closest(effect, content, example, found), False, found + others)
+    return Reading(best, False, found + others)
 
 
 def outline_ink(example: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -277,14 +331,13 @@ def xdog_threshold_from_ink(
     share = float(ink.float().mean()) if ink.numel() else 0.0
     if share == 0.0:
         return float(contours[0]), blackness_range[0], -1.0
-    tried = []
-    for contour in contours.tolist():
-        response = (flat + contour * edges)[valid]
-        blackness = float(torch.quantile(response[:: max(1, response.numel() // 1_000_000)], share))
-        blackness = min(max(blackness, blackness_range[0]), blackness_range[1])
-        drawn = response < blackness
-        overlap = float((drawn & ink).sum()) / max(1.0, float((drawn | ink).sum()))
-        tried.append((contour, blackness, overlap))
+    flat, edges = flat[valid], edges[valid]
+    responses = flat[None, :] + contours.to(flat)[:, None] * edges[None, :]
+    stride = max(1, responses.shape[1] // 1_000_000)
+    blackness = torch.quantile(responses[:, ::stride], share, dim=1).clamp(*blackness_range)
+    drawn = responses < blackness[:, None]
+    overlaps = (drawn & ink).sum(dim=1) / (drawn | ink).sum(dim=1).clamp_min(1)
+    tried = list(zip(contours.tolist(), blackness.tolist(), overlaps.tolist()))
     best = max(overlap for _, _, overlap in tried)
     ties = [entry for entry in tried if entry[2] >= best - TIED_OVERLAP]
     return min(ties, key=lambda entry: abs(entry[0] - (ties[0][0] if current is None else current)))
@@ -349,6 +402,12 @@ def _with(effect: Effect, params: torch.Tensor, **values: float) -> torch.Tensor
         normalized = effect.spec(name).to_normalized(value)
         changed[0, effect.param_names.index(name)] = min(max(normalized, NORMALIZED_MIN), NORMALIZED_MAX)
     return changed
+
+
+def _real(effect: Effect, params: torch.Tensor, *names: str) -> dict[str, float]:
+    """The named parameters of ``params`` ``(1, P)`` in real units."""
+    values = effect.params_to_dict(params.reshape(-1))
+    return {name: values[name] for name in names}
 
 
 def _closest(
