@@ -58,11 +58,13 @@ CLIPPED = 1.0 / 255.0
 """A colour channel this close to 0 or 1 was clipped on the way back to RGB, which moves its
 luminance off the plateau."""
 CLEAR_LEVELS = 3
-CLEAR_AGREEMENT = 0.5
+CLEAR_AGREEMENT = 0.4
+SHARP_LEVELS = 2
+SHARP_AGREEMENT = 0.8
 """Plateaus on the comb of the best bin count, and its agreement, from which that count is taken
 without comparing renders: three plateaus at their centres ``(k + 1/2) / b`` fix the spacing
-and the offset (two fit several counts: 2.18 for levels of 13.45 in a trial of
-``benchmarks/bench_bins.py``)."""
+and the offset, or two where the comb fits them sharply (hard steps). Two that fit it loosely
+fit several counts (2.18 for levels of 13.45 in a trial of ``benchmarks/bench_bins.py``)."""
 LEVEL_SHARE = 0.02
 """Share of the plateau pixels a level must hold to count as occupied."""
 REGRESSION_BIN_STEP = 0.05
@@ -227,7 +229,10 @@ def _cartoon(effect: Effect, content: torch.Tensor, example: torch.Tensor, param
     p, ctx = effect.real_values(content, params)
     abstracted, tangent = effect.abstraction(content, p, ctx)
     outlines = _outline_threshold(effect, example, abstracted[:, :1] / 100.0, tangent, p, ctx.scale)
-    if occupied_levels(luminance, candidates[0]) >= CLEAR_LEVELS and agreements[0] >= CLEAR_AGREEMENT:
+    levels = occupied_levels(luminance, candidates[0])
+    if (levels >= CLEAR_LEVELS and agreements[0] >= CLEAR_AGREEMENT) or (
+        levels >= SHARP_LEVELS and agreements[0] >= SHARP_AGREEMENT
+    ):
         # the period shows: plateaus so spaced and placed fit no other count; the outlines,
         # read from darker pixels that may also be dark paint, only where they fit better
         return Reading(_closest(effect, content, example, [found[0], _with(effect, found[0], **outlines)]), True)
