@@ -9,6 +9,7 @@ from wise.filters.quantize import quantize
 from wise.optimize.inversion import (
     comb_agreement,
     inversion_between_levels,
+    level_agreement,
     invert_steps,
     plateau_bins,
     softness_from_agreement,
@@ -56,10 +57,11 @@ def test_a_luminance_that_no_comb_fits_still_gives_one_candidate() -> None:
 
 def test_the_ramps_width_follows_from_how_sharply_the_plateaus_agree() -> None:
     x = torch.rand(40000, generator=torch.Generator().manual_seed(1))
-    for softness in (0.1, 0.3, 0.6):
-        levels = quantize(x.view(1, 1, 1, -1), 5.0, softness).flatten()
-        agreement = float(comb_agreement(levels, torch.tensor([5.0]))[0])
-        assert softness_from_agreement(agreement, 5.0, 0.0, 1.0) == pytest.approx(softness, abs=0.03)
+    for low, span in ((0.0, 1.0), (0.2, 0.4)):  # every level occupied, or two of five
+        for softness in (0.05, 0.3, 0.6):
+            levels = quantize((low + span * x).view(1, 1, 1, -1), 5.0, softness).flatten()
+            found = softness_from_agreement(level_agreement(levels, 5.0), 5.0, 0.0, 1.0)
+            assert found == pytest.approx(softness, abs=0.05), (low, span, softness)
 
 
 def test_the_staircase_is_fitted_from_the_luminance_before_and_after() -> None:

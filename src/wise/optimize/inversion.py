@@ -46,9 +46,8 @@ BIN_STEP = 0.01
 """Resolution of the bin count searched over the parameter's range."""
 HISTOGRAM_BINS = 2048
 """Bins of the luminance histogram that the comb is scored on."""
-SOFTNESS_TABLE_VALUES = 8192
-"""Evenly spread luminance values that tabulate the comb's agreement against the softness (a
-few per histogram bin, or the table's own sampling would show in the agreement)."""
+SOFTNESS_TABLE_VALUES = 4000
+"""Evenly spread luminance values that tabulate the level agreement against the softness."""
 OUTLINE_DEPTH = 0.01
 """A pixel this much (L* / 100) below the closing of the luminance lies on an outline or its
 antialiased border, not on a plateau: it is left out of the histogram."""
@@ -181,16 +180,34 @@ def plateau_bins(luminance: torch.Tensor, low: float, high: float) -> tuple[list
     return [float(grid[i]) for i in chosen], [float(agreement[i]) for i in chosen]
 
 
+def level_agreement(luminance: torch.Tensor, bins: float) -> float:
+    """``mean(cos(2 pi (L b - 1/2)))`` over the values between the first level centre and the one
+    past the last inner boundary (:func:`inner_span`): how close they sit to the level centres
+    of ``bins``, 1 on them. The outer half levels are left out: their ramps run on past the
+    centre. Unlike :func:`comb_agreement` it does not depend on how many levels the values
+    occupy, so it measures the ramps' width once the count is known."""
+    low, high = inner_span(bins)
+    inner = luminance[(luminance >= low) & (luminance <= high)]
+    values = inner if inner.numel() else luminance
+    return float(torch.cos(2.0 * math.pi * (values.double() * bins - 0.5)).mean())
+
+
+def inner_span(bins: float) -> tuple[float, float]:
+    """The first level centre and the centre past the last inner boundary of ``bins`` levels."""
+    bins = max(bins, MIN_BINS)
+    return 0.5 / bins, min(1.0, (math.ceil(bins) - 0.5) / bins)
+
+
 def softness_from_agreement(agreement: float, bins: float, low: float, high: float) -> float:
-    """The softness in ``[low, high]`` at which luminance spread evenly over [0, 1] and quantized
-    into ``bins`` gives ``agreement`` (it falls from 1 at 0 as the ramps widen)."""
-    grid = torch.linspace(low, high, 101)
-    x = ((torch.arange(SOFTNESS_TABLE_VALUES) + 0.5) / SOFTNESS_TABLE_VALUES).view(1, 1, 1, -1)
+    """The softness in ``[low, high]`` at which luminance spread evenly over the inner levels and quantized
+    into ``bins`` gives the :func:`level_agreement` ``agreement`` (it falls from 1 at 0 as the
+    ramps widen)."""
+    grid = torch.linspace(low, high, 201)
+    low_end, high_end = inner_span(bins)
+    x = low_end + (high_end - low_end) * (torch.arange(SOFTNESS_TABLE_VALUES) + 0.5) / SOFTNESS_TABLE_VALUES
+    x = x.view(1, 1, 1, -1)
     levels = quantize(x.expand(len(grid), 1, 1, -1), torch.full((len(grid),), bins), grid).view(len(grid), -1)
-    index = (levels.double().clamp(0.0, 1.0) * HISTOGRAM_BINS).long().clamp_max(HISTOGRAM_BINS - 1)
-    index += HISTOGRAM_BINS * torch.arange(len(grid))[:, None]
-    counts = torch.bincount(index.flatten(), minlength=len(grid) * HISTOGRAM_BINS).view(len(grid), -1).double()
-    table = _comb(counts / counts.sum(dim=1, keepdim=True), torch.tensor([bins]))[:, 0]
+    table = torch.cos(2.0 * math.pi * (levels.double() * bins - 0.5)).mean(dim=1)
     return float(grid[(table - agreement).abs().argmin()])
 
 
@@ -223,8 +240,8 @@ def _cartoon(effect: Effect, content: torch.Tensor, example: torch.Tensor, param
     luminance = example_luminance(example)[kept]
     found = []
     candidates, agreements = plateau_bins(luminance, *bins_range)
-    for bins, agreement in zip(candidates, agreements):
-        softness = softness_from_agreement(agreement, bins, *softness_range)
+    for bins in candidates:
+        softness = softness_from_agreement(level_agreement(luminance, bins), bins, *softness_range)
         found.append(_with(effect, params, bins=bins, softness=softness))
     p, ctx = effect.real_values(content, params)
     abstracted, tangent = effect.abstraction(content, p, ctx)
