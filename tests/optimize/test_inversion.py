@@ -9,8 +9,8 @@ from wise.filters.quantize import quantize
 from wise.optimize.inversion import (
     comb_agreement,
     inversion_between_levels,
-    level_agreement,
     invert_steps,
+    level_agreement,
     plateau_bins,
     softness_from_agreement,
     staircase_fit,
