@@ -8,7 +8,8 @@ nowhere useful until the steps line up, and descent settles in a local minimum (
   ``(k + 1/2) / bins`` (:func:`wise.filters.quantize.quantize`), whatever the colour adjustments
   before it did. The bin count is the period of the example's luminance histogram, the one whose
   comb ``cos(2 pi (L bins - 1/2))`` the plateaus agree with most (:func:`plateau_bins`); how
-  sharply they agree gives the ramps' width (:func:`softness_from_agreement`).
+  close the values sit to the level centres gives the ramps' width (:func:`level_agreement`,
+  :func:`softness_from_agreement`).
 - **XDoG** ``contour``, ``blackness`` and ``shading``: outside the ink the drawing is the shading
   ``1 - s (1 - L)`` of the abstracted luminance ``L``, a line in ``s``; the ink is where the
   response ``u = u0 + contour u1`` of :func:`wise.effects.common.edge_response` lies below
@@ -140,31 +141,20 @@ def comb_agreement(luminance: torch.Tensor, bins: torch.Tensor) -> torch.Tensor:
     one period ``1/b`` around each value (so the spread of the content's own tones, which varies
     slowly, does not count). 1 where every value sits on a level centre, about 0 for a count
     unrelated to the example's levels."""
-    return _comb(_histogram(luminance)[None], bins)[0]
-
-
-def _histogram(luminance: torch.Tensor) -> torch.Tensor:
     counts = torch.histc(luminance.double(), HISTOGRAM_BINS, 0.0, 1.0)
-    return counts / counts.sum().clamp_min(1.0)
-
-
-def _comb(weights: torch.Tensor, bins: torch.Tensor) -> torch.Tensor:
-    """:func:`comb_agreement` of histograms ``weights`` ``(R, HISTOGRAM_BINS)`` for the counts
-    ``bins`` ``(G,)``: ``(R, G)``."""
-    rows = weights.shape[0]
-    cumulative = F.pad(weights.cumsum(1), (1, 0))
+    weights = counts / counts.sum().clamp_min(1.0)
+    cumulative = F.pad(weights.cumsum(0), (1, 0))
     centres = torch.arange(HISTOGRAM_BINS, dtype=torch.float64) + 0.5
     half = HISTOGRAM_BINS / (2.0 * bins.double()[:, None])
 
-    def mass_below(position: torch.Tensor) -> torch.Tensor:  # (G, N) -> (R, G, N)
+    def mass_below(position: torch.Tensor) -> torch.Tensor:  # linear within a histogram bin
         position = position.clamp(0.0, float(HISTOGRAM_BINS))
         low = position.floor().long().clamp_max(HISTOGRAM_BINS - 1)
-        gathered = cumulative[:, low.flatten()].view(rows, *low.shape)
-        return gathered + (position - low) * weights[:, low.flatten()].view(rows, *low.shape)
+        return cumulative[low] + (position - low) * weights[low]
 
     envelope = (mass_below(centres + half) - mass_below(centres - half)) / (2.0 * half)
     phases = 2.0 * math.pi * (centres[None, :] / HISTOGRAM_BINS * bins.double()[:, None] - 0.5)
-    return (torch.cos(phases) * (weights[:, None, :] - envelope)).sum(dim=2)
+    return (torch.cos(phases) * (weights[None, :] - envelope)).sum(dim=1)
 
 
 def plateau_bins(luminance: torch.Tensor, low: float, high: float) -> tuple[list[float], list[float]]:
@@ -232,10 +222,9 @@ def _cartoon(effect: Effect, content: torch.Tensor, example: torch.Tensor, param
     bins_spec, softness_spec = effect.spec("bins"), effect.spec("softness")
     bins_range, softness_range = (bins_spec.min, bins_spec.max), (softness_spec.min, softness_spec.max)
     kept = plateau_pixels(example)
+    if int(kept.sum()) >= 64:
+        kept &= ~clamped_ends(example_luminance(example), kept)
     if int(kept.sum()) < 64:  # nothing flat to read: an outline drawing or a blank example
-        return Reading(params, False)
-    kept &= ~clamped_ends(example_luminance(example), kept)
-    if int(kept.sum()) < 64:
         return Reading(params, False)
     luminance = example_luminance(example)[kept]
     found = []
@@ -253,7 +242,7 @@ def _cartoon(effect: Effect, content: torch.Tensor, example: torch.Tensor, param
         # the period shows: plateaus so spaced and placed fit no other count; the outlines,
         # read from darker pixels that may also be dark paint, only where they fit better
         return Reading(_closest(effect, content, example, [found[0], _with(effect, found[0], **outlines)]), True)
-    # two plateaus fit many periods: the content's abstracted luminance, mapped onto the
+    # plateaus that fit several periods: the content's abstracted luminance, mapped onto the
     # example's by a staircase, is one more candidate, and the renders decide, at the outlines as
     # they stand, then with the outlines read (read wrongly, they would spoil every comparison)
     bins, softness = staircase_fit((abstracted[:, :1] / 100.0)[kept], luminance, bins_range, softness_range)
