@@ -7,7 +7,7 @@ import torch.nn.functional as F
 from wise import effects
 from wise.cli import main
 from wise.io import write_image
-from wise.optimize.benchmark import schedule
+from wise.optimize.benchmark import _better_of, schedule
 from wise.optimize.trials import MIN_REFERENCE_CONTRAST, PSNR_CAP, random_reference
 
 
@@ -67,3 +67,16 @@ def test_an_exact_recovery_counts_as_the_psnr_cap(tmp_path: Path, astronaut: tor
     with open(tmp_path / "log", "w") as log:
         result = benchmark.recover("xdog", str(photos), trials=1, size=32, iterations=3, lr=1e-6, out=log)
     assert result["trials"][0]["psnr"] == PSNR_CAP and result["mean_psnr"] == PSNR_CAP
+
+
+def test_crop_iterations_that_leave_the_whole_image_worse_are_dropped(astronaut: torch.Tensor) -> None:
+    cartoon = effects.create("cartoon").eval()
+    content = F.interpolate(astronaut, size=(64, 64), mode="area")
+    truth = cartoon.default_params().reshape(1, -1)
+    wrong = truth.clone()
+    wrong[0, cartoon.param_names.index("bins")] = 0.4  # far off on the staircase
+    with torch.no_grad():
+        reference = cartoon(content, truth)
+    for loss in ("l1", "l2"):
+        assert torch.equal(_better_of(cartoon, content, reference, loss, truth, wrong), truth)
+        assert torch.equal(_better_of(cartoon, content, reference, loss, wrong, truth), truth)

@@ -6,14 +6,17 @@ import torch.nn.functional as F
 
 from wise import effects
 from wise.filters.quantize import quantize
+from wise.optimize import inversion
 from wise.optimize.inversion import (
     comb_agreement,
+    fit_colours_to_levels,
     inversion_between_levels,
     invert_steps,
     level_agreement,
     plateau_bins,
     softness_from_agreement,
     staircase_fit,
+    unquantized_bounds,
     xdog_threshold_from_ink,
 )
 from wise.optimize.parametric import Settings, optimize_coarse_to_fine
@@ -69,6 +72,42 @@ def test_the_staircase_is_fitted_from_the_luminance_before_and_after() -> None:
     after = quantize(x.view(1, 1, 1, -1), 9.3, 0.4).flatten()
     bins, softness = staircase_fit(x, after, (2.0, 16.0), (0.0, 1.0))
     assert bins == pytest.approx(9.3, abs=0.03) and softness == pytest.approx(0.4, abs=0.01)
+
+
+def test_the_quantizer_is_inverted_to_a_point_on_a_ramp_and_a_level_on_a_plateau() -> None:
+    x = torch.rand(3000, generator=torch.Generator().manual_seed(4)) * 1.2 - 0.1  # some clamped
+    for bins, softness in ((5.0, 0.0), (7.5, 0.4)):
+        levels = quantize(x.clamp(0.0, 1.0).view(1, 1, 1, -1), bins, softness).flatten()
+        low, high, known = unquantized_bounds(levels, bins, softness)
+        assert known.all()
+        assert ((low <= x + 1e-3) & (x - 1e-3 <= high)).all()  # the input lies within its bounds
+        inner = (x > 1.0 / bins) & (x < (math.ceil(bins) - 1.0) / bins)  # the outer levels reach on
+        width = (high - low)[inner]
+        if softness == 0.0:  # a plateau: the level's width
+            assert width.max() <= 1.0 / bins + 1e-3 and width.min() >= 1.0 / bins - 2e-3
+        else:  # on the ramps the quantizer is invertible: mostly narrow
+            assert float((width < 0.05).float().mean()) > 0.5
+        assert torch.isinf(low[x < 0.0]).all() and torch.isinf(high[x > 1.0]).all()
+    _, _, known = unquantized_bounds(torch.tensor([0.4, 0.5]), 5.0, 0.0)  # between two hard levels; a centre
+    assert known.tolist() == [False, True]
+
+
+def test_the_colour_adjustments_are_fitted_to_the_examples_levels(
+    astronaut: torch.Tensor, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    cartoon, content, truth, example = _example(
+        astronaut, "cartoon", 96, bins=6.0, softness=0.05, brightness=0.15, contrast=1.6, saturation=0.5, tint=0.3
+    )
+    start = _with(cartoon, truth, brightness=-0.1, contrast=1.0, saturation=1.5, tint=0.0)
+    monkeypatch.setattr(inversion, "FIT_ITERATIONS", 100)  # enough at 96 pixels
+    fitted = fit_colours_to_levels(cartoon, content, example, start)
+    with torch.no_grad():
+        before, after = (float((cartoon(content, p) - example).square().mean()) for p in (start, fitted))
+    assert after < 0.25 * before
+    for name, tolerance in (("brightness", 0.08), ("saturation", 0.2), ("tint", 0.08)):
+        assert _real(cartoon, fitted, name) == pytest.approx(_real(cartoon, truth, name), abs=tolerance), name
+    untouched = [i for i, name in enumerate(cartoon.param_names) if name in ("bins", "softness", "details", "contour")]
+    assert torch.equal(fitted[0, untouched], start[0, untouched])
 
 
 def test_the_ink_threshold_comes_from_the_ink_share_and_the_response() -> None:

@@ -5,8 +5,8 @@ effect's defaults (or from the parameters a trained model predicts, ``init="ppn"
 to match it: half the iterations coarse to fine on reduced copies, then a grid search at full
 size of the parameters the effect names as out of the gradient's reach
 (:mod:`wise.optimize.search`), then the other half on random crops at full resolution, where
-details too fine for a reduced copy (brush texture, thin lines) can be matched; SSIM and PSNR
-measure how close it gets.
+details too fine for a reduced copy (brush texture, thin lines) can be matched, kept where the
+whole image is closer for them; SSIM and PSNR measure how close it gets.
 """
 
 from __future__ import annotations
@@ -96,7 +96,7 @@ def _trial(
     truth, reference = random_reference(effect, content, generator)
     start = effect.default_params() if predictor is None else predictor(content, reference)
     began = time.perf_counter()
-    start, held = read_steps(effect, content, reference, start.reshape(1, -1), search=True)
+    start, held = read_steps(effect, content, reference, start.reshape(1, -1), search=True, fit=True)
     levels = tuple((reduction, replace(settings, held=held)) for reduction, settings in levels)
     crops = None if crops is None else replace(crops, held=held)
     between = inversion_between_levels(effect, content, reference)
@@ -111,12 +111,28 @@ def _trial(
         outcome.params, _ = coordinate_search(effect, content, reference, outcome.params)
         outcome.seconds += time.perf_counter() - began
     if crops is not None and not outcome.interrupted:
-        coarse_seconds, coarse_losses = outcome.seconds, outcome.losses
+        coarse = outcome
         crop_generator = torch.Generator().manual_seed(crop_seed)
-        outcome = optimize_on_crops(effect, content, reference, outcome.params, crops, crop_generator)
-        outcome.seconds += coarse_seconds
-        outcome.losses = coarse_losses + outcome.losses
+        outcome = optimize_on_crops(effect, content, reference, coarse.params, crops, crop_generator)
+        outcome.seconds += coarse.seconds
+        outcome.losses = coarse.losses + outcome.losses
+        if not outcome.interrupted:
+            outcome.params = _better_of(effect, content, reference, crops.loss, coarse.params, outcome.params)
+            with torch.no_grad():
+                outcome.result = effect(content, outcome.params)
     return truth, reference, outcome
+
+
+def _better_of(
+    effect: Effect, content: torch.Tensor, reference: torch.Tensor, loss: str, *candidates: torch.Tensor
+) -> torch.Tensor:
+    """The parameters whose whole render is closest to ``reference`` by ``loss`` (L1 or L2): the
+    crop iterations see a region at a time, and where the look has hard steps (a cartoon's
+    levels) their steps can leave the whole image worse than they found it."""
+    power = 1 if loss == "l1" else 2
+    with torch.no_grad():
+        losses = [float((effect(content, c).clamp(0.0, 1.0) - reference).abs().pow(power).mean()) for c in candidates]
+    return candidates[losses.index(min(losses))]
 
 
 def recover(

@@ -18,6 +18,12 @@ nowhere useful until the steps line up, and descent settles in a local minimum (
   ink covers the example's best is kept (:func:`xdog_threshold_from_ink`). A cartoon's outlines
   are read the same way, its ink being the pixels much darker than the colour around them.
 
+- **cartoon colour adjustments**, once ``bins`` and ``softness`` are known: the quantizer is
+  inverted (:func:`unquantized_bounds`; a point on a ramp, a level's width on a plateau) and the
+  chroma is the example's away from the outlines, so the colour adjustments are fitted to the
+  abstracted colours before quantization, where they act smoothly, rather than to the look's
+  steps (:func:`fit_colours_to_levels`).
+
 :func:`read_steps` applies them to parameters ``(1, P)``; effects without such parameters are
 returned unchanged. The estimates read the other parameters (the colour adjustments, ``details``)
 where they stand: optimization calls it at the start and again between its levels, once descent
@@ -35,7 +41,7 @@ import torch
 import torch.nn.functional as F
 
 from wise.effects.base import Effect
-from wise.effects.common import detail_sigmas, edge_response
+from wise.effects.common import COLOUR_ADJUSTMENTS, detail_sigmas, edge_response
 from wise.filters import rgb_to_lab
 from wise.filters.quantize import MIN_BINS, quantize
 from wise.optimize.parametric import Settings, optimize
@@ -90,6 +96,16 @@ INK = 0.5
 """A pixel whose line factor (drawing over shading) is below this is ink."""
 SHADING_FIT = 0.03
 """Pixels within this ratio of the fitted shading count as inliers of the shading fit."""
+LEVEL_TOLERANCE = 0.004
+"""Luminance (L* / 100) within which an example's value counts as one the quantizer gives: 8-bit
+colours and the way back through RGB move a level by about this much."""
+UNQUANTIZE_SAMPLES = 4097
+"""Luminance values at which the quantizer is tabulated to invert it."""
+FIT_SIDE = 128
+FIT_ITERATIONS = 200
+FIT_LR = 0.1
+"""The fit of the colour adjustments to the un-quantized example (:func:`fit_colours_to_levels`):
+short side, iterations and learning rate of its descent."""
 
 
 @dataclass
@@ -218,6 +234,64 @@ def staircase_fit(
     return float(bins[best]), float(softness[best])
 
 
+def unquantized_bounds(
+    levels: torch.Tensor, bins: float, softness: float
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """``(low, high, known)``: the luminance before quantization that ``bins`` levels of ramps
+    ``softness`` map to each value of ``levels`` (flat): a point on a ramp, where the quantizer can
+    be inverted, or a whole level's width on a plateau. The outer levels reach on past 0 and 1
+    (content clamped before quantization); ``known`` is false where no input gives the value
+    (within :data:`LEVEL_TOLERANCE`), e.g. a pixel that mixes two levels."""
+    inputs = torch.linspace(0.0, 1.0, UNQUANTIZE_SAMPLES)
+    steps = torch.tensor([bins]), torch.tensor([max(softness, 1e-4)])
+    outputs = quantize(inputs.view(1, 1, 1, -1), *steps).flatten()
+    outputs = torch.cummax(outputs, dim=0).values  # monotonic up to rounding, for the search below
+    first = torch.searchsorted(outputs, levels - LEVEL_TOLERANCE, right=False)
+    last = torch.searchsorted(outputs, levels + LEVEL_TOLERANCE, right=True) - 1
+    known = first <= last
+    low = torch.where(first == 0, -math.inf, inputs[first.clamp(max=UNQUANTIZE_SAMPLES - 1)])
+    high = torch.where(last >= UNQUANTIZE_SAMPLES - 1, math.inf, inputs[last.clamp(min=0)])
+    return low, high, known
+
+
+def fit_colours_to_levels(
+    effect: Effect, content: torch.Tensor, example: torch.Tensor, params: torch.Tensor
+) -> torch.Tensor:
+    """``params`` ``(1, P)`` with the colour adjustments descended so that the content's
+    abstracted colours agree with a cartoon ``example`` un-quantized at its ``bins`` and
+    ``softness``: the chroma (a*, b*) is the example's wherever no outline darkens it, and the
+    luminance lies where the quantizer maps it to the example's level (:func:`unquantized_bounds`).
+    Unlike the rendered look, these change smoothly with the colour adjustments, so descent on
+    them does not stall on the staircase. Runs at :data:`FIT_SIDE` pixels."""
+    content, example = _working_copy(content, FIT_SIDE), _working_copy(example, FIT_SIDE)
+    values = effect.params_to_dict(params.reshape(-1))
+    lab = rgb_to_lab(example.clamp(0.0, 1.0))
+    low, high, known = unquantized_bounds((lab[:, :1] / 100.0).flatten(), values["bins"], values["softness"])
+    used = plateau_pixels(example).flatten() & known
+    if int(used.sum()) < 64:
+        return params
+    low, high, chroma = low[used], high[used], lab[0, 1:].flatten(1)[:, used] / 100.0
+    fitted = [effect.param_names.index(name) for name in COLOUR_ADJUSTMENTS if name in effect.param_names]
+    held = torch.ones(params.shape[-1], dtype=torch.bool)
+    held[fitted] = False
+    descended = params.detach().clone().requires_grad_()
+    optimizer = torch.optim.Adam([descended], lr=FIT_LR)
+    for _ in range(FIT_ITERATIONS):
+        optimizer.zero_grad(set_to_none=True)
+        p, ctx = effect.real_values(content, descended)
+        abstracted = effect.abstraction(content, p, ctx)[0].flatten(2)[0][:, used] / 100.0
+        luminance = abstracted[0]
+        outside = torch.relu(low - luminance) + torch.relu(luminance - high)
+        loss = outside.square().mean() + (abstracted[1:] - chroma).square().mean()
+        loss.backward()
+        assert descended.grad is not None
+        descended.grad[:, held] = 0.0
+        optimizer.step()
+        with torch.no_grad():
+            descended.clamp_(NORMALIZED_MIN, NORMALIZED_MAX)
+    return descended.detach()
+
+
 def _cartoon(effect: Effect, content: torch.Tensor, example: torch.Tensor, params: torch.Tensor) -> Reading:
     bins_spec, softness_spec = effect.spec("bins"), effect.spec("softness")
     bins_range, softness_range = (bins_spec.min, bins_spec.max), (softness_spec.min, softness_spec.max)
@@ -252,6 +326,27 @@ def _cartoon(effect: Effect, content: torch.Tensor, example: torch.Tensor, param
     found = [_with(effect, best, **_real(effect, f, "bins", "softness")) for f in found]
     others = [_with(effect, found[-1], bins=b) for b in SEARCHED_BINS if bins_range[0] <= b <= bins_range[1]]
     return Reading(best, False, found + others)
+
+
+def _cartoon_outlines(
+    effect: Effect, content: torch.Tensor, example: torch.Tensor, params: torch.Tensor
+) -> dict[str, float]:
+    """The cartoon's ``contour`` and ``blackness`` read from the outlines of ``example``, with
+    the other parameters at ``params``."""
+    p, ctx = effect.real_values(content, params)
+    abstracted, tangent = effect.abstraction(content, p, ctx)
+    return _outline_threshold(effect, example, abstracted[:, :1] / 100.0, tangent, p, ctx.scale)
+
+
+def _cartoon_colours(
+    effect: Effect, content: torch.Tensor, example: torch.Tensor, params: torch.Tensor
+) -> torch.Tensor:
+    """``params`` with the colour adjustments fitted to the example's levels
+    (:func:`fit_colours_to_levels`) and the outlines read again at them, where that fits better."""
+    fitted = fit_colours_to_levels(effect, content, example, params)
+    with torch.no_grad():
+        outlines = _cartoon_outlines(effect, content, example, fitted)
+        return _closest(effect, content, example, [params, fitted, _with(effect, fitted, **outlines)])
 
 
 def outline_ink(example: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -405,6 +500,11 @@ _ESTIMATES: dict[str, Callable[[Effect, torch.Tensor, torch.Tensor, torch.Tensor
     "xdog": _xdog,
 }
 
+_COLOUR_FITS: dict[str, Callable[[Effect, torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor]] = {
+    "cartoon": _cartoon_colours,
+}
+"""Fits of the other parameters that the steps, once read, make smooth (:func:`read_steps` with ``fit``)."""
+
 
 def _with(effect: Effect, params: torch.Tensor, **values: float) -> torch.Tensor:
     """``params`` ``(1, P)`` with the named parameters set to real ``values`` (normalized, clamped)."""
@@ -460,6 +560,7 @@ def read_steps(
     params: torch.Tensor,
     side: int = WORKING_SIDE,
     search: bool = False,
+    fit: bool = False,
 ) -> tuple[torch.Tensor, tuple[str, ...]]:
     """``params`` (normalized ``(1, P)``) with the step-like parameters of ``effect`` read off
     ``example``, the effect's rendering of ``content`` (both ``(1, 3, H, W)``, same size); the
@@ -469,7 +570,9 @@ def read_steps(
     parameters and, where the example showed them clearly, the staircase parameters
     (:data:`HELD_PARAMS`) that descent should hold (:attr:`wise.optimize.parametric.Settings.held`).
     With ``search``, an estimate the example leaves open is settled by a short discrete search:
-    each candidate descended briefly at :data:`SEARCH_SIDE` pixels, the best kept (seconds)."""
+    each candidate descended briefly at :data:`SEARCH_SIDE` pixels, the best kept (seconds).
+    With ``fit``, the parameters the steps make smooth are then fitted to the example
+    (cartoon: the colour adjustments, :func:`fit_colours_to_levels`; seconds)."""
     estimate = _ESTIMATES.get(getattr(effect, "name", ""))  # a wrapped effect (a test's) has none
     if estimate is None:
         return params, ()
@@ -483,6 +586,8 @@ def read_steps(
             found = _closest(effect, content, example, [given, found])
     if not reading.clear and search and len(reading.candidates) > 1:
         found = best_after_brief_descent(effect, content, example, [given, *reading.candidates])
+    if fit and effect.name in _COLOUR_FITS:
+        found = _COLOUR_FITS[effect.name](effect, content, example, found)
     held = HELD_PARAMS[effect.name] if reading.clear else ()
     return found.to(device=device, dtype=params.dtype).reshape(params.shape), held
 

@@ -190,7 +190,7 @@ def _read_steps(
         return start, None, ()
     start = start.reshape(1, -1)
     began = time.perf_counter()
-    read, held = read_steps(effect, content, target, start, search=True)
+    read, held = read_steps(effect, content, target, start, search=True, fit=True)
     said = describe_estimates(effect, start, read)
     if said is not None:
         print(f"read off the target: {said} ({time.perf_counter() - began:.1f} s)", file=out, flush=True)
