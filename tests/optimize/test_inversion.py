@@ -14,6 +14,7 @@ from wise.optimize.inversion import (
     invert_steps,
     level_agreement,
     plateau_bins,
+    read_steps,
     softness_from_agreement,
     staircase_fit,
     unquantized_bounds,
@@ -230,3 +231,19 @@ def test_the_bin_count_alone_is_read_within_a_quarter_on_photos_and_generated_pi
         read = _real(effect, invert_steps(effect, content, example, start), "bins")
         hits.append(abs(read - bins) <= 0.25)
     assert sum(hits) >= 11, f"bins read within 0.25 in {sum(hits)} of {len(hits)} examples"
+
+
+def test_steps_read_clearly_bring_the_colours_fitted_to_them(
+    astronaut: torch.Tensor, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    cartoon, content, truth, example = _example(
+        astronaut, "cartoon", 96, bins=5.0, softness=0.05, brightness=0.2, contrast=1.5, saturation=0.6
+    )
+    start = _with(cartoon, truth, bins=9.0, softness=0.5, brightness=-0.1, contrast=1.0, saturation=1.5)
+    monkeypatch.setattr(inversion, "FIT_ITERATIONS", 60)
+    read, held = read_steps(cartoon, content, example, start)
+    fitted, held_too = read_steps(cartoon, content, example, start, fit=True)
+    assert held == held_too == ("bins",) and _real(cartoon, fitted, "bins") == pytest.approx(5.0, abs=0.1)
+    with torch.no_grad():
+        plain, better = (float((cartoon(content, p) - example).square().mean()) for p in (read, fitted))
+    assert better < 0.5 * plain

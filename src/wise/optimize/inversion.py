@@ -571,8 +571,8 @@ def read_steps(
     (:data:`HELD_PARAMS`) that descent should hold (:attr:`wise.optimize.parametric.Settings.held`).
     With ``search``, an estimate the example leaves open is settled by a short discrete search:
     each candidate descended briefly at :data:`SEARCH_SIDE` pixels, the best kept (seconds).
-    With ``fit``, the parameters the steps make smooth are then fitted to the example
-    (cartoon: the colour adjustments, :func:`fit_colours_to_levels`; seconds)."""
+    With ``fit``, the parameters that steps read clearly make smooth are then fitted to the
+    example (cartoon: the colour adjustments, :func:`fit_colours_to_levels`; seconds)."""
     estimate = _ESTIMATES.get(getattr(effect, "name", ""))  # a wrapped effect (a test's) has none
     if estimate is None:
         return params, ()
@@ -586,7 +586,9 @@ def read_steps(
             found = _closest(effect, content, example, [given, found])
     if not reading.clear and search and len(reading.candidates) > 1:
         found = best_after_brief_descent(effect, content, example, [given, *reading.candidates])
-    if fit and effect.name in _COLOUR_FITS:
+    if fit and reading.clear and effect.name in _COLOUR_FITS:
+        # on steps read wrongly the fit pulls the colours away (one trial of the benchmark: 0.97
+        # SSIM without it, 0.92 with it); steps the example leaves open are not fitted to
         found = _COLOUR_FITS[effect.name](effect, content, example, found)
     held = HELD_PARAMS[effect.name] if reading.clear else ()
     return found.to(device=device, dtype=params.dtype).reshape(params.shape), held
