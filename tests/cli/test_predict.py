@@ -19,7 +19,7 @@ import wise
 from tests.cli.helpers import run_in_process
 from wise import ppn
 from wise.io import read_image
-from wise.optimize.inversion import INVERTED_PARAMS
+from wise.optimize.inversion import FITTED_PARAMS, INVERTED_PARAMS
 from wise.optimize.trials import content_at, random_reference
 from wise.ppn.modelfile import ModelInfo, save_model
 from wise.ppn.predictor import Predictor
@@ -160,7 +160,7 @@ def test_recover_starts_from_the_prediction(files: dict[str, Path]) -> None:
     content = content_at(read_image(root / "photos" / "chelsea.png"), 32)
     _, reference = random_reference(effect, content, torch.Generator().manual_seed(0))
     predicted = effect.params_to_dict(Predictor(str(model), "cartoon")(content, reference)[0])
-    read = set(INVERTED_PARAMS["cartoon"])  # read off the reference before descent starts
+    read = {*INVERTED_PARAMS["cartoon"], *FITTED_PARAMS["cartoon"]}  # read off the reference before descent
     found = {name: value for name, value in result["trials"][0]["found_params"].items() if name not in read}
     assert found == pytest.approx({name: predicted[name] for name in found}, rel=1e-4, abs=1e-4)
     assert predicted != pytest.approx(effect.params_to_dict(effect.default_params()), rel=1e-3, abs=1e-3)

@@ -9,6 +9,7 @@ from wise.filters.quantize import quantize
 from wise.optimize import inversion
 from wise.optimize.inversion import (
     comb_agreement,
+    describe_estimates,
     fit_colours_to_levels,
     inversion_between_levels,
     invert_steps,
@@ -247,3 +248,11 @@ def test_steps_read_clearly_bring_the_colours_fitted_to_them(
     with torch.no_grad():
         plain, better = (float((cartoon(content, p) - example).square().mean()) for p in (read, fitted))
     assert better < 0.5 * plain
+
+
+def test_what_was_read_or_fitted_is_said() -> None:
+    cartoon = effects.create("cartoon")
+    before = cartoon.default_params().reshape(1, -1)
+    after = _with(cartoon, before, bins=4.0, brightness=0.1)
+    assert describe_estimates(cartoon, before, after) == "bins 4.00, brightness 0.10"
+    assert describe_estimates(cartoon, before, before) is None

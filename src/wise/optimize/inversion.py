@@ -490,6 +490,9 @@ INVERTED_PARAMS: dict[str, tuple[str, ...]] = {
 }
 """The parameters each effect's estimate sets; the others are left where they stand."""
 
+FITTED_PARAMS: dict[str, tuple[str, ...]] = {"cartoon": COLOUR_ADJUSTMENTS}
+"""The parameters :func:`read_steps` with ``fit`` may also set, fitted to steps read clearly."""
+
 HELD_PARAMS: dict[str, tuple[str, ...]] = {"cartoon": ("bins",), "xdog": ()}
 """Of those, the ones with no useful gradient: read clearly, descent holds them. The others have
 a gradient once the steps line up (softness and shading everywhere, the soft threshold at the
@@ -625,8 +628,9 @@ def inversion_between_levels(
 
 
 def describe_estimates(effect: Effect, before: torch.Tensor, after: torch.Tensor) -> str | None:
-    """``"bins 4.02, softness 0.10"``: the parameters :func:`invert_steps` changed, in real
-    units; None when it changed none."""
+    """``"bins 4.02, softness 0.10"``: the parameters :func:`read_steps` changed (read or
+    fitted), in real units; None when it changed none."""
     old, new = effect.params_to_dict(before.reshape(-1)), effect.params_to_dict(after.reshape(-1))
-    changed = [f"{name} {new[name]:.2f}" for name in INVERTED_PARAMS.get(effect.name, ()) if new[name] != old[name]]
+    names = INVERTED_PARAMS.get(effect.name, ()) + FITTED_PARAMS.get(effect.name, ())
+    changed = [f"{name} {new[name]:.2f}" for name in names if new[name] != old[name]]
     return ", ".join(changed) or None
