@@ -120,5 +120,6 @@ def test_optimize_reads_the_number_of_levels_off_the_target_first(images, tmp_pa
     said = capsys.readouterr().out
     line = next(line for line in said.splitlines() if line.startswith("read off the target: "))
     assert "bins 4." in line  # the bold preset's 4 levels
+    assert said.index("reading the look's steps off the target") < said.index(line)  # nothing waits silently
     params = json.loads((out / "metrics.json").read_text()).get("params")
     assert params is None or params["bins"] == pytest.approx(4.0, abs=0.5)

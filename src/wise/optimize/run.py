@@ -189,6 +189,7 @@ def _read_steps(
     if between is None or start.dim() > 2:  # masks given to start from are kept as they are
         return start, None, ()
     start = start.reshape(1, -1)
+    print("reading the look's steps off the target before descent (seconds)", file=out, flush=True)
     began = time.perf_counter()
     read, held = read_steps(effect, content, target, start, search=True, fit=True)
     said = describe_estimates(effect, start, read)
