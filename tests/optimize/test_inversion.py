@@ -92,6 +92,10 @@ def test_the_quantizer_is_inverted_to_a_point_on_a_ramp_and_a_level_on_a_plateau
         assert torch.isinf(low[x < 0.0]).all() and torch.isinf(high[x > 1.0]).all()
     _, _, known = unquantized_bounds(torch.tensor([0.4, 0.5]), 5.0, 0.0)  # between two hard levels; a centre
     assert known.tolist() == [False, True]
+    low, _, known = unquantized_bounds(
+        torch.tensor([0.5], dtype=torch.float64), 5.0, 0.0
+    )  # on the values' device and dtype
+    assert known.all() and low.dtype == torch.float64 and float(low) == pytest.approx(0.4, abs=1e-3)
 
 
 def test_the_colour_adjustments_are_fitted_to_the_examples_levels(

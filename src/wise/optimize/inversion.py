@@ -242,8 +242,9 @@ def unquantized_bounds(
     be inverted, or a whole level's width on a plateau. The outer levels reach on past 0 and 1
     (content clamped before quantization); ``known`` is false where no input gives the value
     (within :data:`LEVEL_TOLERANCE`), e.g. a pixel that mixes two levels."""
-    inputs = torch.linspace(0.0, 1.0, UNQUANTIZE_SAMPLES)
-    steps = torch.tensor([bins]), torch.tensor([max(softness, 1e-4)])
+    like = {"device": levels.device, "dtype": levels.dtype}
+    inputs = torch.linspace(0.0, 1.0, UNQUANTIZE_SAMPLES, **like)
+    steps = torch.tensor([bins], **like), torch.tensor([max(softness, 1e-4)], **like)
     outputs = quantize(inputs.view(1, 1, 1, -1), *steps).flatten()
     outputs = torch.cummax(outputs, dim=0).values  # monotonic up to rounding, for the search below
     first = torch.searchsorted(outputs, levels - LEVEL_TOLERANCE, right=False)
@@ -272,7 +273,7 @@ def fit_colours_to_levels(
         return params
     low, high, chroma = low[used], high[used], lab[0, 1:].flatten(1)[:, used] / 100.0
     fitted = [effect.param_names.index(name) for name in COLOUR_ADJUSTMENTS if name in effect.param_names]
-    held = torch.ones(params.shape[-1], dtype=torch.bool)
+    held = torch.ones(params.shape[-1], dtype=torch.bool, device=params.device)
     held[fitted] = False
     descended = params.detach().clone().requires_grad_()
     optimizer = torch.optim.Adam([descended], lr=FIT_LR)
