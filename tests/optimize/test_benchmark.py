@@ -7,7 +7,8 @@ import torch.nn.functional as F
 from wise import effects
 from wise.cli import main
 from wise.io import write_image
-from wise.optimize.benchmark import _better_of, schedule
+from wise.optimize.benchmark import schedule
+from wise.optimize.parametric import closest
 from wise.optimize.trials import MIN_REFERENCE_CONTRAST, PSNR_CAP, random_reference
 
 
@@ -78,5 +79,5 @@ def test_crop_iterations_that_leave_the_whole_image_worse_are_dropped(astronaut:
     with torch.no_grad():
         reference = cartoon(content, truth)
     for loss in ("l1", "l2"):
-        assert torch.equal(_better_of(cartoon, content, reference, loss, truth, wrong), truth)
-        assert torch.equal(_better_of(cartoon, content, reference, loss, wrong, truth), truth)
+        assert torch.equal(closest(cartoon, content, reference, [truth, wrong], loss), truth)
+        assert torch.equal(closest(cartoon, content, reference, [wrong, truth], loss), truth)

@@ -27,6 +27,7 @@ from wise.optimize.parametric import (
     CROP_SIZE,
     Outcome,
     Settings,
+    closest,
     describe_levels,
     optimize_coarse_to_fine,
     optimize_on_crops,
@@ -117,22 +118,11 @@ def _trial(
         outcome.seconds += coarse.seconds
         outcome.losses = coarse.losses + outcome.losses
         if not outcome.interrupted:
-            outcome.params = _better_of(effect, content, reference, crops.loss, coarse.params, outcome.params)
+            # a cartoon's hard steps move with every crop: they can leave the whole image worse
+            outcome.params = closest(effect, content, reference, [coarse.params, outcome.params], crops.loss)
             with torch.no_grad():
                 outcome.result = effect(content, outcome.params)
     return truth, reference, outcome
-
-
-def _better_of(
-    effect: Effect, content: torch.Tensor, reference: torch.Tensor, loss: str, *candidates: torch.Tensor
-) -> torch.Tensor:
-    """The parameters whose whole render is closest to ``reference`` by ``loss`` (L1 or L2): the
-    crop iterations see a region at a time, and where the look has hard steps (a cartoon's
-    levels) their steps can leave the whole image worse than they found it."""
-    power = 1 if loss == "l1" else 2
-    with torch.no_grad():
-        losses = [float((effect(content, c).clamp(0.0, 1.0) - reference).abs().pow(power).mean()) for c in candidates]
-    return candidates[losses.index(min(losses))]
 
 
 def recover(

@@ -44,7 +44,7 @@ from wise.effects.base import Effect
 from wise.effects.common import COLOUR_ADJUSTMENTS, detail_sigmas, edge_response
 from wise.filters import rgb_to_lab
 from wise.filters.quantize import MIN_BINS, quantize
-from wise.optimize.parametric import Settings, optimize
+from wise.optimize.parametric import Settings, closest, optimize
 from wise.params import NORMALIZED_MAX, NORMALIZED_MIN
 
 WORKING_SIDE = 512
@@ -316,14 +316,14 @@ def _cartoon(effect: Effect, content: torch.Tensor, example: torch.Tensor, param
     ):
         # the period shows: plateaus so spaced and placed fit no other count; the outlines,
         # read from darker pixels that may also be dark paint, only where they fit better
-        return Reading(_closest(effect, content, example, [found[0], _with(effect, found[0], **outlines)]), True)
+        return Reading(closest(effect, content, example, [found[0], _with(effect, found[0], **outlines)]), True)
     # plateaus that fit several periods: the content's abstracted luminance, mapped onto the
     # example's by a staircase, is one more candidate, and the renders decide, at the outlines as
     # they stand, then with the outlines read (read wrongly, they would spoil every comparison)
     bins, softness = staircase_fit((abstracted[:, :1] / 100.0)[kept], luminance, bins_range, softness_range)
     found.append(_with(effect, params, bins=bins, softness=softness))
-    steps = _closest(effect, content, example, found)
-    best = _closest(effect, content, example, [steps, _with(effect, steps, **outlines)])
+    steps = closest(effect, content, example, found)
+    best = closest(effect, content, example, [steps, _with(effect, steps, **outlines)])
     found = [_with(effect, best, **_real(effect, f, "bins", "softness")) for f in found]
     others = [_with(effect, found[-1], bins=b) for b in SEARCHED_BINS if bins_range[0] <= b <= bins_range[1]]
     return Reading(best, False, found + others)
@@ -347,7 +347,7 @@ def _cartoon_colours(
     fitted = fit_colours_to_levels(effect, content, example, params)
     with torch.no_grad():
         outlines = _cartoon_outlines(effect, content, example, fitted)
-        return _closest(effect, content, example, [params, fitted, _with(effect, fitted, **outlines)])
+        return closest(effect, content, example, [params, fitted, _with(effect, fitted, **outlines)])
 
 
 def outline_ink(example: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -525,17 +525,6 @@ def _real(effect: Effect, params: torch.Tensor, *names: str) -> dict[str, float]
     return {name: values[name] for name in names}
 
 
-def _closest(
-    effect: Effect, content: torch.Tensor, example: torch.Tensor, candidates: list[torch.Tensor]
-) -> torch.Tensor:
-    """The candidate whose render is closest to ``example`` (mean squared difference)."""
-    if len(candidates) == 1:
-        return candidates[0]
-    with torch.no_grad():
-        losses = [float((effect(content, c).clamp(0.0, 1.0) - example).square().mean()) for c in candidates]
-    return candidates[losses.index(min(losses))]
-
-
 def _working_copy(image: torch.Tensor, side: int) -> torch.Tensor:
     short = min(image.shape[-2:])
     if short <= side:
@@ -587,7 +576,7 @@ def read_steps(
         reading = estimate(effect, content, example, given)
         found = reading.params
         if not reading.clear:  # an estimate that the example leaves open must fit better than what was there
-            found = _closest(effect, content, example, [given, found])
+            found = closest(effect, content, example, [given, found])
     if not reading.clear and search and len(reading.candidates) > 1:
         found = best_after_brief_descent(effect, content, example, [given, *reading.candidates])
     if fit and reading.clear and effect.name in _COLOUR_FITS:

@@ -115,6 +115,19 @@ def _image_loss(kind: str, content: torch.Tensor, target: torch.Tensor, vgg_weig
     return lambda output: ((output - target) ** 2).mean()
 
 
+def closest(
+    effect: Effect, content: torch.Tensor, target: torch.Tensor, candidates: Sequence[torch.Tensor], loss: str = "l2"
+) -> torch.Tensor:
+    """The candidate parameters whose render of ``content`` is closest to ``target`` by ``loss``
+    (``l1`` or ``l2``, the first of equals); a single candidate is returned without rendering."""
+    if len(candidates) == 1:
+        return candidates[0]
+    power = 1 if loss == "l1" else 2
+    with torch.no_grad():
+        losses = [float((effect(content, c).clamp(0.0, 1.0) - target).abs().pow(power).mean()) for c in candidates]
+    return candidates[losses.index(min(losses))]
+
+
 def total_variation(masks: torch.Tensor) -> torch.Tensor:
     """Mean absolute difference of neighbouring mask values (Johnson et al. 2016)."""
     return (masks[..., 1:, :] - masks[..., :-1, :]).abs().mean() + (masks[..., 1:] - masks[..., :-1]).abs().mean()
