@@ -1,6 +1,7 @@
 import json
 from pathlib import Path
 
+import pytest
 import torch
 import torch.nn.functional as F
 
@@ -70,14 +71,23 @@ def test_an_exact_recovery_counts_as_the_psnr_cap(tmp_path: Path, astronaut: tor
     assert result["trials"][0]["psnr"] == PSNR_CAP and result["mean_psnr"] == PSNR_CAP
 
 
-def test_crop_iterations_that_leave_the_whole_image_worse_are_dropped(astronaut: torch.Tensor) -> None:
-    cartoon = effects.create("cartoon").eval()
-    content = F.interpolate(astronaut, size=(64, 64), mode="area")
-    truth = cartoon.default_params().reshape(1, -1)
-    wrong = truth.clone()
-    wrong[0, cartoon.param_names.index("bins")] = 0.4  # far off on the staircase
-    with torch.no_grad():
-        reference = cartoon(content, truth)
+def test_crop_iterations_that_leave_the_whole_image_worse_are_dropped(off_the_staircase) -> None:
+    case = off_the_staircase
     for loss in ("l1", "l2"):
-        assert torch.equal(closest(cartoon, content, reference, [truth, wrong], loss), truth)
-        assert torch.equal(closest(cartoon, content, reference, [wrong, truth], loss), truth)
+        for candidates in ([case.truth, case.wrong], [case.wrong, case.truth]):
+            assert torch.equal(closest(case.cartoon, case.content, case.target, candidates, loss), case.truth)
+
+
+def test_of_several_starts_the_trial_keeps_the_one_that_ends_closest(off_the_staircase, monkeypatch) -> None:
+    from wise.optimize import benchmark
+
+    case = off_the_staircase
+    monkeypatch.setattr(benchmark, "random_reference", lambda effect, content, generator: (case.truth, case.target))
+    monkeypatch.setattr(benchmark, "inversion_between_levels", lambda *args: None)  # no reading in between
+    bins = case.cartoon.param_names.index("bins")
+    for starts in ([case.wrong, case.truth], [case.truth, case.wrong]):
+        monkeypatch.setattr(benchmark, "read_starts", lambda *args, starts=starts: (starts, ("bins",)))
+        levels, crops = benchmark.schedule(4, 1e-4, "l2")
+        _, _, outcome = benchmark._trial(case.cartoon, case.content, torch.Generator(), levels, crops, 0)
+        assert outcome.params[0, bins] == pytest.approx(float(case.truth[0, bins]), abs=1e-3)
+        assert torch.equal(outcome.result, case.cartoon(case.content, outcome.params).detach())

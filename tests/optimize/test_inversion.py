@@ -5,6 +5,7 @@ import torch
 import torch.nn.functional as F
 
 from wise import effects
+from wise.effects.common import COLOUR_ADJUSTMENTS
 from wise.filters.quantize import quantize
 from wise.optimize import inversion
 from wise.optimize.inversion import (
@@ -15,6 +16,7 @@ from wise.optimize.inversion import (
     invert_steps,
     level_agreement,
     plateau_bins,
+    read_starts,
     read_steps,
     softness_from_agreement,
     staircase_fit,
@@ -260,3 +262,31 @@ def test_what_was_read_or_fitted_is_said() -> None:
     after = _with(cartoon, before, bins=4.0, brightness=0.1)
     assert describe_estimates(cartoon, before, after) == "bins 4.00, brightness 0.10"
     assert describe_estimates(cartoon, before, before) is None
+
+
+def test_unclear_steps_leave_a_second_start_with_the_colours_fitted(
+    astronaut: torch.Tensor, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    cartoon, content, truth, example = _example(
+        astronaut, "cartoon", 96, bins=10.0, softness=0.9, brightness=0.2, contrast=1.5, saturation=0.6
+    )
+    start = cartoon.default_params().reshape(1, -1)
+    monkeypatch.setattr(inversion, "FIT_ITERATIONS", 60)
+    monkeypatch.setattr(inversion, "SEARCH_ITERATIONS", 2)
+    starts, held = read_starts(cartoon, content, example, start)
+    assert held == () and len(starts) == 2
+    read, fitted = starts
+    colours = [cartoon.param_names.index(name) for name in COLOUR_ADJUSTMENTS]
+    steps = [cartoon.param_names.index(name) for name in ("bins", "softness", "details")]
+    assert not torch.equal(read[0, colours], fitted[0, colours])
+    assert torch.equal(read[0, steps], fitted[0, steps])
+
+
+def test_steps_read_clearly_or_effects_without_a_fit_leave_one_start(astronaut: torch.Tensor) -> None:
+    cartoon, content, _, example = _example(astronaut, "cartoon", 96, bins=5.0, softness=0.05)
+    start = cartoon.default_params().reshape(1, -1)
+    starts, held = read_starts(cartoon, content, example, start)
+    assert held == ("bins",) and len(starts) == 1
+    xdog, content, _, example = _example(astronaut, "xdog", 96, contour=2.0)
+    starts, held = read_starts(xdog, content, example, xdog.default_params().reshape(1, -1))
+    assert held == () and len(starts) == 1

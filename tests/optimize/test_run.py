@@ -123,3 +123,34 @@ def test_optimize_reads_the_number_of_levels_off_the_target_first(images, tmp_pa
     assert said.index("reading the look's steps off the target") < said.index(line)  # nothing waits silently
     params = json.loads((out / "metrics.json").read_text()).get("params")
     assert params is None or params["bins"] == pytest.approx(4.0, abs=0.5)
+
+
+def test_of_two_starts_the_first_level_decides_and_says_so(off_the_staircase) -> None:
+    import io
+
+    from wise.optimize.parametric import Settings
+    from wise.optimize.run import _first_level_decides
+
+    case = off_the_staircase
+    first_level = (2, Settings(mode="local", iterations=2, lr=1e-4, loss="l1", held=("bins",)))
+    for starts in ([case.wrong, case.truth], [case.truth, case.wrong]):
+        said = io.StringIO()
+        chosen = _first_level_decides(case.cartoon, case.content, case.target, starts, first_level, said)
+        assert chosen is case.truth
+        assert "the first level (2 iterations at 32 px) runs from each" in said.getvalue()
+        assert "going on from" in said.getvalue()
+    said = io.StringIO()
+    assert _first_level_decides(case.cartoon, case.content, case.target, [case.wrong], first_level, said) is case.wrong
+    assert said.getvalue() == ""
+
+
+def test_the_time_left_counts_from_the_start_of_descent_not_the_reading() -> None:
+    from wise.optimize.parametric import Settings, pyramid
+    from wise.optimize.run import Progress
+
+    levels = pyramid(Settings(iterations=30))
+    progress = Progress(levels)
+    progress.began -= 1000.0  # a long reading of the steps before descent
+    progress.start()
+    line = progress.line(levels[0][1].iterations, 0.05, torch.zeros(1, 3, 16, 20))
+    assert float(line.split("about ")[1].split(" s left")[0]) < 5.0

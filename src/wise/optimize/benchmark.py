@@ -22,7 +22,7 @@ import torch
 from wise import effects, metrics
 from wise.effects.base import Effect
 from wise.errors import WiseError
-from wise.optimize.inversion import inversion_between_levels, read_steps
+from wise.optimize.inversion import inversion_between_levels, read_starts
 from wise.optimize.parametric import (
     CROP_SIZE,
     Outcome,
@@ -93,36 +93,59 @@ def _trial(
     crop_seed: int,
     predictor: Callable[[torch.Tensor, torch.Tensor], torch.Tensor] | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor, Outcome]:
-    """One trial: random parameters, their reference, and the optimization's outcome."""
+    """One trial: random parameters, their reference, and the optimization's outcome: from each
+    start that the reading leaves (:func:`wise.optimize.inversion.read_starts`), the one that ends
+    closest, its time that of all starts."""
     truth, reference = random_reference(effect, content, generator)
     start = effect.default_params() if predictor is None else predictor(content, reference)
     began = time.perf_counter()
-    start, held = read_steps(effect, content, reference, start.reshape(1, -1), search=True, fit=True)
+    starts, held = read_starts(effect, content, reference, start.reshape(1, -1))
     levels = tuple((reduction, replace(settings, held=held)) for reduction, settings in levels)
     crops = None if crops is None else replace(crops, held=held)
+    outcomes = []
+    for params in starts:
+        outcomes.append(_descend(effect, content, reference, params, levels, crops, crop_seed))
+        if outcomes[-1].interrupted:
+            return truth, reference, outcomes[-1]
+    loss = levels[-1][1].loss
+    best = closest(effect, content, reference, [outcome.params for outcome in outcomes], loss)
+    outcome = next(outcome for outcome in outcomes if outcome.params is best)
+    outcome.seconds = time.perf_counter() - began  # the reading and every start included
+    return truth, reference, outcome
+
+
+def _descend(
+    effect: Effect,
+    content: torch.Tensor,
+    reference: torch.Tensor,
+    start: torch.Tensor,
+    levels: tuple[tuple[int, Settings], ...],
+    crops: Settings | None,
+    crop_seed: int,
+) -> Outcome:
+    """Coarse to fine from ``start`` (the steps read again between the levels), the grid search of
+    the effect's searched parameters, then the crops, kept where the whole image is closer."""
     between = inversion_between_levels(effect, content, reference)
     outcome = optimize_coarse_to_fine(effect, content, reference, start, levels, between_levels=between)
     if between is not None and not outcome.interrupted:
         outcome.params = between(outcome.params)
         with torch.no_grad():
             outcome.result = effect(content, outcome.params)
-    outcome.seconds = time.perf_counter() - began  # the estimates included
     if effect.searched_params and not outcome.interrupted:
-        began = time.perf_counter()
         outcome.params, _ = coordinate_search(effect, content, reference, outcome.params)
-        outcome.seconds += time.perf_counter() - began
+        with torch.no_grad():
+            outcome.result = effect(content, outcome.params)
     if crops is not None and not outcome.interrupted:
         coarse = outcome
         crop_generator = torch.Generator().manual_seed(crop_seed)
         outcome = optimize_on_crops(effect, content, reference, coarse.params, crops, crop_generator)
-        outcome.seconds += coarse.seconds
         outcome.losses = coarse.losses + outcome.losses
         if not outcome.interrupted:
             # a cartoon's hard steps move with every crop: they can leave the whole image worse
             outcome.params = closest(effect, content, reference, [coarse.params, outcome.params], crops.loss)
             with torch.no_grad():
                 outcome.result = effect(content, outcome.params)
-    return truth, reference, outcome
+    return outcome
 
 
 def recover(

@@ -71,6 +71,13 @@ SHARP_AGREEMENT = 0.8
 without comparing renders: three plateaus at their centres ``(k + 1/2) / b`` fix the spacing
 and the offset, or two where the comb fits them sharply (hard steps). Two that fit it loosely
 fit several counts (2.18 for levels of 13.45 in a trial of ``benchmarks/bench_bins.py``)."""
+CLEAR_SOFTNESS = 0.15
+CLEAR_SHARE = 0.1
+"""Besides, a count is taken as read only from hard steps (ramps read narrower than this many
+levels) on at least this share of the example's pixels. Wide ramps make every count render
+nearly the same picture, and a few thousand plateau pixels (a dark, heavily outlined example)
+form a comb by chance: on the training photos of ``benchmarks/bench_bins.py``, five of the six
+counts taken wrongly had ramps read at 0.19–0.22 levels or plateaus on 3–12 % of the pixels."""
 LEVEL_SHARE = 0.02
 """Share of the plateau pixels a level must hold to count as occupied."""
 REGRESSION_BIN_STEP = 0.05
@@ -302,17 +309,19 @@ def _cartoon(effect: Effect, content: torch.Tensor, example: torch.Tensor, param
     if int(kept.sum()) < 64:  # nothing flat to read: an outline drawing or a blank example
         return Reading(params, False)
     luminance = example_luminance(example)[kept]
-    found = []
+    found, softnesses = [], []
     candidates, agreements = plateau_bins(luminance, *bins_range)
     for bins in candidates:
-        softness = softness_from_agreement(level_agreement(luminance, bins), bins, *softness_range)
-        found.append(_with(effect, params, bins=bins, softness=softness))
+        softnesses.append(softness_from_agreement(level_agreement(luminance, bins), bins, *softness_range))
+        found.append(_with(effect, params, bins=bins, softness=softnesses[-1]))
     p, ctx = effect.real_values(content, params)
     abstracted, tangent = effect.abstraction(content, p, ctx)
     outlines = _outline_threshold(effect, example, abstracted[:, :1] / 100.0, tangent, p, ctx.scale)
     levels = occupied_levels(luminance, candidates[0])
-    if (levels >= CLEAR_LEVELS and agreements[0] >= CLEAR_AGREEMENT) or (
-        levels >= SHARP_LEVELS and agreements[0] >= SHARP_AGREEMENT
+    hard_steps = softnesses[0] < CLEAR_SOFTNESS and float(kept.float().mean()) >= CLEAR_SHARE
+    if hard_steps and (
+        (levels >= CLEAR_LEVELS and agreements[0] >= CLEAR_AGREEMENT)
+        or (levels >= SHARP_LEVELS and agreements[0] >= SHARP_AGREEMENT)
     ):
         # the period shows: plateaus so spaced and placed fit no other count; the outlines,
         # read from darker pixels that may also be dark paint, only where they fit better
@@ -587,23 +596,54 @@ def read_steps(
     return found.to(device=device, dtype=params.dtype).reshape(params.shape), held
 
 
+def read_starts(
+    effect: Effect,
+    content: torch.Tensor,
+    example: torch.Tensor,
+    params: torch.Tensor,
+    side: int = WORKING_SIDE,
+) -> tuple[list[torch.Tensor], tuple[str, ...]]:
+    """The starts of a multi-start descent and the parameters it holds: :func:`read_steps` with
+    ``search`` and ``fit``, and where the steps stay unclear (so that reading was not fitted), the
+    reading with the colours fitted to its levels as a second start. Fitted to a count read wrongly,
+    the colours mislead descent; fitted to one that was nearly right, they lead it to the example
+    (BENCHMARKS.md, "Two starts where the count is unclear"): only a descent from both tells which."""
+    found, held = read_steps(effect, content, example, params, side, search=True, fit=True)
+    fit = _COLOUR_FITS.get(getattr(effect, "name", ""))
+    if held or fit is None:
+        return [found], held
+    small_content, small_example = _working_copy(content.detach(), side), _working_copy(example.detach(), side)
+    reading = found.detach().reshape(1, -1).to(small_content)
+    fitted = fit(effect, small_content, small_example.to(small_content), reading)
+    if torch.equal(fitted, reading):
+        return [found], held
+    return [found, fitted.to(device=params.device, dtype=params.dtype).reshape(params.shape)], held
+
+
 def best_after_brief_descent(
-    effect: Effect, content: torch.Tensor, example: torch.Tensor, candidates: list[torch.Tensor]
+    effect: Effect,
+    content: torch.Tensor,
+    example: torch.Tensor,
+    candidates: list[torch.Tensor],
+    settings: Settings | None = None,
+    side: int = SEARCH_SIDE,
 ) -> torch.Tensor:
-    """The candidate that, descended :data:`SEARCH_ITERATIONS` times on copies at
-    :data:`SEARCH_SIDE` pixels with its staircase parameters held, fits ``example`` best (the
-    candidate as it was, not as descended: the full descent follows)."""
-    small_content, small_example = _working_copy(content, SEARCH_SIDE), _working_copy(example, SEARCH_SIDE)
-    settings = Settings(
-        mode="global", iterations=SEARCH_ITERATIONS, lr=SEARCH_LR, loss="l2", held=HELD_PARAMS[effect.name]
-    )
+    """The candidate that, descended with ``settings`` (default: :data:`SEARCH_ITERATIONS` global
+    iterations with its staircase parameters held) on copies whose short side is ``side``, fits
+    ``example`` best by the settings' loss (L1 or L2), the candidate as it was, not as descended:
+    the full descent follows."""
+    small_content, small_example = _working_copy(content, side), _working_copy(example, side)
+    if settings is None:
+        settings = Settings(
+            mode="global", iterations=SEARCH_ITERATIONS, lr=SEARCH_LR, loss="l2", held=HELD_PARAMS[effect.name]
+        )
+    power = 1 if settings.loss == "l1" else 2
     losses = []
     for candidate in candidates:
         outcome = optimize(effect, small_content, small_example, candidate, settings)
         with torch.no_grad():
-            losses.append(
-                float((effect(small_content, outcome.params).clamp(0.0, 1.0) - small_example).square().mean())
-            )
+            rendered = effect(small_content, outcome.params).clamp(0.0, 1.0)
+            losses.append(float((rendered - small_example).abs().pow(power).mean()))
     return candidates[losses.index(min(losses))]
 
 

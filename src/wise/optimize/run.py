@@ -19,7 +19,12 @@ from wise.errors import WiseError, size_text
 from wise.interrupt import ctrl_c
 from wise.io import atomic_path, read_image, tensor_to_image, write_image
 from wise.nst import check_builtin_style, stylize, stylize_gatys
-from wise.optimize.inversion import describe_estimates, inversion_between_levels, read_steps
+from wise.optimize.inversion import (
+    best_after_brief_descent,
+    describe_estimates,
+    inversion_between_levels,
+    read_starts,
+)
 from wise.optimize.parametric import Outcome, Settings, describe_levels, optimize_coarse_to_fine, pyramid
 from wise.optimize.report import write_animation, write_report
 from wise.paramfile import load_params, save_params
@@ -78,6 +83,10 @@ class Progress:
 
     def __init__(self, levels: Sequence[tuple[int, Settings]]) -> None:
         self.levels = levels
+        self.began = time.perf_counter()
+
+    def start(self) -> None:
+        """Count the time from now: the descent begins (what came before is not its pace)."""
         self.began = time.perf_counter()
 
     def _work(self, iterations: int) -> float:
@@ -159,8 +168,10 @@ def run(
             print(progress.line(iteration, loss, output), file=out, flush=True)
 
     with ctrl_c(out) as interruption:
-        start_params, between, held = _read_steps(effect, content, target, start_params.to(device), out)
+        starts, between, held = _read_steps(effect, content, target, start_params.to(device), out)
         levels = tuple((reduction, replace(level, held=held)) for reduction, level in levels)
+        start_params = _first_level_decides(effect, content, target, starts, levels[0], out)
+        progress.start()
         outcome = optimize_coarse_to_fine(effect, content, target, start_params, levels, on_step, between)
         interruption.hold()
         if outcome.interrupted:
@@ -181,21 +192,49 @@ def run(
 
 def _read_steps(
     effect: Effect, content: torch.Tensor, target: torch.Tensor, start: torch.Tensor, out: TextIO
-) -> tuple[torch.Tensor, Callable[[torch.Tensor], torch.Tensor] | None, tuple[str, ...]]:
-    """The start with the staircase parameters read off the target (:mod:`wise.optimize.inversion`;
-    said on ``out``), the hook that reads them again between the levels, and the parameters
-    descent holds; for parameter masks the start values of every pixel."""
+) -> tuple[list[torch.Tensor], Callable[[torch.Tensor], torch.Tensor] | None, tuple[str, ...]]:
+    """The starts with the staircase parameters read off the target (:mod:`wise.optimize.inversion`;
+    said on ``out``; two where the reading stays unclear, :func:`read_starts`), the hook that reads
+    them again between the levels, and the parameters descent holds; for parameter masks the start
+    values of every pixel."""
     between = inversion_between_levels(effect, content, target)
     if between is None or start.dim() > 2:  # masks given to start from are kept as they are
-        return start, None, ()
+        return [start], None, ()
     start = start.reshape(1, -1)
     print("reading the look's steps off the target before descent (seconds)", file=out, flush=True)
     began = time.perf_counter()
-    read, held = read_steps(effect, content, target, start, search=True, fit=True)
-    said = describe_estimates(effect, start, read)
+    starts, held = read_starts(effect, content, target, start)
+    said = describe_estimates(effect, start, starts[0])
     if said is not None:
         print(f"read off the target: {said} ({time.perf_counter() - began:.1f} s)", file=out, flush=True)
-    return read, between, held
+    return starts, between, held
+
+
+def _first_level_decides(
+    effect: Effect,
+    content: torch.Tensor,
+    target: torch.Tensor,
+    starts: list[torch.Tensor],
+    first_level: tuple[int, Settings],
+    out: TextIO,
+) -> torch.Tensor:
+    """Of several starts, the one whose run of the first (reduced) level ends closest to the target;
+    a single start, or a first level at the working size (too costly to run twice), takes the first."""
+    reduction, settings = first_level
+    if len(starts) == 1 or reduction == 1:
+        return starts[0]
+    side = max(8, min(content.shape[-2:]) // reduction)
+    print(
+        f"the reading left two starts: the first level ({settings.iterations} iterations at {side} px) "
+        "runs from each, the closer one goes on",
+        file=out,
+        flush=True,
+    )
+    began = time.perf_counter()
+    chosen = best_after_brief_descent(effect, content, target, starts, settings, side)
+    which = "the colours fitted to the levels" if chosen is starts[-1] else "the reading as it was"
+    print(f"going on from {which} ({time.perf_counter() - began:.1f} s)", file=out, flush=True)
+    return chosen
 
 
 def _write_results(
