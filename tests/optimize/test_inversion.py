@@ -290,3 +290,15 @@ def test_steps_read_clearly_or_effects_without_a_fit_leave_one_start(astronaut: 
     xdog, content, _, example = _example(astronaut, "xdog", 96, contour=2.0)
     starts, held = read_starts(xdog, content, example, xdog.default_params().reshape(1, -1))
     assert held == () and len(starts) == 1
+
+
+def test_a_count_is_held_only_where_the_steps_are_hard() -> None:
+    cartoon = effects.create("cartoon").eval()
+    content = dead_leaves(128, torch.Generator().manual_seed(0))
+    for softness, held_then in ((0.02, ("bins",)), (0.3, ())):  # wide ramps: the count barely shows
+        truth = _with(cartoon, cartoon.default_params().reshape(1, -1), bins=6.0, softness=softness)
+        with torch.no_grad():
+            example = cartoon(content, truth)
+        found, held = read_steps(cartoon, content, example, cartoon.default_params().reshape(1, -1))
+        assert held == held_then
+        assert _real(cartoon, found, "bins") == pytest.approx(6.0, abs=0.1)  # read all the same
