@@ -302,3 +302,18 @@ def test_a_count_is_held_only_where_the_steps_are_hard() -> None:
         found, held = read_steps(cartoon, content, example, cartoon.default_params().reshape(1, -1))
         assert held == held_then
         assert _real(cartoon, found, "bins") == pytest.approx(6.0, abs=0.1)  # read all the same
+
+
+def test_the_outlines_width_is_read_off_the_ink(astronaut: torch.Tensor) -> None:
+    cartoon, content, truth, example = _example(astronaut, "cartoon", 128, stroke_width=1.1, contour=2.0)
+    start = _with(cartoon, truth, stroke_width=0.4, contour=1.0)
+    with torch.no_grad():
+        read = inversion._cartoon_outlines(cartoon, content, example, start)
+    step = (cartoon.spec("stroke_width").max - cartoon.spec("stroke_width").min) / (inversion.STROKE_WIDTHS - 1)
+    assert read["stroke_width"] == pytest.approx(1.1, abs=step + 1e-3)  # within one width of the grid
+    with torch.no_grad():
+        before, after = (
+            float((cartoon(content, p) - example).square().mean())
+            for p in (start, inversion._with(cartoon, start, **read))
+        )
+    assert after < 0.5 * before
