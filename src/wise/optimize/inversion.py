@@ -325,7 +325,7 @@ def _cartoon(effect: Effect, content: torch.Tensor, example: torch.Tensor, param
         found.append(_with(effect, params, bins=bins, softness=softnesses[-1]))
     p, ctx = effect.real_values(content, params)
     abstracted, tangent = effect.abstraction(content, p, ctx)
-    outlines = _outline_threshold(effect, example, abstracted[:, :1] / 100.0, tangent, p, ctx.scale)
+    outlines = _outline_reading(effect, example, abstracted[:, :1] / 100.0, tangent, p, ctx.scale)[0]
     levels = occupied_levels(luminance, candidates[0])
     enough = float(kept.float().mean()) >= CLEAR_SHARE or agreements[0] >= SPARSE_AGREEMENT
     hard_steps = softnesses[0] < CLEAR_SOFTNESS and enough
@@ -353,7 +353,7 @@ def _cartoon_outlines(
 ) -> dict[str, float]:
     """The cartoon's ``stroke_width``, ``contour`` and ``blackness`` read from the outlines of
     ``example``, with the other parameters at ``params``: for each of :data:`STROKE_WIDTHS` widths
-    the threshold that draws the example's ink best (:func:`_outline_threshold`), the width whose
+    the threshold that draws the example's ink best (:func:`_outline_reading`), the width whose
     ink overlaps the example's most kept (empty where no outline shows)."""
     p, ctx = effect.real_values(content, params)
     abstracted, tangent = effect.abstraction(content, p, ctx)
@@ -390,19 +390,6 @@ def outline_ink(example: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     return (brightness < INK * around) & visible, visible
 
 
-def _outline_threshold(
-    effect: Effect,
-    example: torch.Tensor,
-    luminance: torch.Tensor,
-    tangent: torch.Tensor,
-    p: dict[str, torch.Tensor],
-    scale: float,
-) -> dict[str, float]:
-    """``contour`` and ``blackness`` of the outlines of ``example``, read from its ink and the
-    edge response of the abstracted ``luminance`` (empty where no outline shows)."""
-    return _outline_reading(effect, example, luminance, tangent, p, scale)[0]
-
-
 def _outline_reading(
     effect: Effect,
     example: torch.Tensor,
@@ -411,8 +398,9 @@ def _outline_reading(
     p: dict[str, torch.Tensor],
     scale: float,
 ) -> tuple[dict[str, float], float]:
-    """:func:`_outline_threshold` and how well that threshold's ink overlaps the example's
-    (intersection over union; -1 where no outline shows)."""
+    """``contour`` and ``blackness`` of the outlines of ``example``, read from its ink and the
+    edge response of the abstracted ``luminance`` (empty where no outline shows), and how well
+    that threshold's ink overlaps the example's (intersection over union; -1 where none shows)."""
     smoothing = detail_sigmas(p["details"])["edge_smoothing"]
     flat, sharpened = (
         edge_response(luminance, tangent, p["stroke_width"], c, smoothing, effect.kernel_size, scale)
