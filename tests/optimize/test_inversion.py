@@ -292,18 +292,6 @@ def test_steps_read_clearly_or_effects_without_a_fit_leave_one_start(astronaut: 
     assert held == () and len(starts) == 1
 
 
-def test_a_count_is_held_only_where_the_steps_are_hard() -> None:
-    cartoon = effects.create("cartoon").eval()
-    content = dead_leaves(128, torch.Generator().manual_seed(0))
-    for softness, held_then in ((0.02, ("bins",)), (0.3, ())):  # wide ramps: the count barely shows
-        truth = _with(cartoon, cartoon.default_params().reshape(1, -1), bins=6.0, softness=softness)
-        with torch.no_grad():
-            example = cartoon(content, truth)
-        found, held = read_steps(cartoon, content, example, cartoon.default_params().reshape(1, -1))
-        assert held == held_then
-        assert _real(cartoon, found, "bins") == pytest.approx(6.0, abs=0.1)  # read all the same
-
-
 def test_the_outlines_width_is_read_off_the_ink(astronaut: torch.Tensor) -> None:
     cartoon, content, truth, example = _example(astronaut, "cartoon", 128, stroke_width=1.1, contour=2.0)
     start = _with(cartoon, truth, stroke_width=0.4, contour=1.0)
