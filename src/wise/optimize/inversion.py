@@ -510,7 +510,8 @@ INVERTED_PARAMS: dict[str, tuple[str, ...]] = {
 """The parameters each effect's estimate sets; the others are left where they stand."""
 
 FITTED_PARAMS: dict[str, tuple[str, ...]] = {"cartoon": (*COLOUR_ADJUSTMENTS, "stroke_width")}
-"""The parameters :func:`read_steps` with ``fit`` may also set, fitted to steps read clearly."""
+"""The parameters :func:`read_steps` with ``fit`` may also set, fitted to steps read clearly (and
+:func:`read_starts` to an unclear reading, as its second start): the colours and the outlines' width."""
 
 HELD_PARAMS: dict[str, tuple[str, ...]] = {"cartoon": ("bins",), "xdog": ()}
 """Of those, the ones with no useful gradient: read clearly, descent holds them. The others have
