@@ -248,9 +248,11 @@ def test_steps_read_clearly_bring_the_colours_fitted_to_them(
     )
     start = _with(cartoon, truth, bins=9.0, softness=0.5, brightness=-0.1, contrast=1.0, saturation=1.5)
     monkeypatch.setattr(inversion, "FIT_ITERATIONS", 60)
-    read, held = read_steps(cartoon, content, example, start)
-    fitted, held_too = read_steps(cartoon, content, example, start, fit=True)
-    assert held == held_too == ("bins",) and _real(cartoon, fitted, "bins") == pytest.approx(5.0, abs=0.1)
+    starts, held = read_starts(cartoon, content, example, start)
+    assert held == ("bins",) and len(starts) == 2  # the reading, and the reading fitted: descent decides
+    read, fitted = starts
+    assert torch.equal(read, read_steps(cartoon, content, example, start, search=True)[0])
+    assert _real(cartoon, fitted, "bins") == pytest.approx(5.0, abs=0.1)
     with torch.no_grad():
         plain, better = (float((cartoon(content, p) - example).square().mean()) for p in (read, fitted))
     assert better < 0.5 * plain
@@ -282,9 +284,12 @@ def test_unclear_steps_leave_a_second_start_with_the_colours_fitted(
     assert torch.equal(read[0, steps], fitted[0, steps])
 
 
-def test_steps_read_clearly_or_effects_without_a_fit_leave_one_start(astronaut: torch.Tensor) -> None:
+def test_a_reading_the_fit_leaves_as_it_is_or_effects_without_a_fit_leave_one_start(
+    astronaut: torch.Tensor, monkeypatch: pytest.MonkeyPatch
+) -> None:
     cartoon, content, _, example = _example(astronaut, "cartoon", 96, bins=5.0, softness=0.05)
     start = cartoon.default_params().reshape(1, -1)
+    monkeypatch.setattr(inversion, "_COLOUR_FITS", {"cartoon": lambda effect, content, example, params: params})
     starts, held = read_starts(cartoon, content, example, start)
     assert held == ("bins",) and len(starts) == 1
     xdog, content, _, example = _example(astronaut, "xdog", 96, contour=2.0)

@@ -510,8 +510,8 @@ INVERTED_PARAMS: dict[str, tuple[str, ...]] = {
 """The parameters each effect's estimate sets; the others are left where they stand."""
 
 FITTED_PARAMS: dict[str, tuple[str, ...]] = {"cartoon": (*COLOUR_ADJUSTMENTS, "stroke_width")}
-"""The parameters :func:`read_steps` with ``fit`` may also set, fitted to steps read clearly (and
-:func:`read_starts` to an unclear reading, as its second start): the colours and the outlines' width."""
+"""The parameters :func:`read_starts` fits to the steps read, for its second start: the colours and
+the outlines' width."""
 
 HELD_PARAMS: dict[str, tuple[str, ...]] = {"cartoon": ("bins",), "xdog": ()}
 """Of those, the ones with no useful gradient: read clearly, descent holds them. The others have
@@ -526,7 +526,7 @@ _ESTIMATES: dict[str, Callable[[Effect, torch.Tensor, torch.Tensor, torch.Tensor
 _COLOUR_FITS: dict[str, Callable[[Effect, torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor]] = {
     "cartoon": _cartoon_colours,
 }
-"""Fits of the other parameters that the steps, once read, make smooth (:func:`read_steps` with ``fit``)."""
+"""Fits of the other parameters that the steps, once read, make smooth (:func:`read_starts`)."""
 
 
 def _with(effect: Effect, params: torch.Tensor, **values: float) -> torch.Tensor:
@@ -572,7 +572,6 @@ def read_steps(
     params: torch.Tensor,
     side: int = WORKING_SIDE,
     search: bool = False,
-    fit: bool = False,
 ) -> tuple[torch.Tensor, tuple[str, ...]]:
     """``params`` (normalized ``(1, P)``) with the step-like parameters of ``effect`` read off
     ``example``, the effect's rendering of ``content`` (both ``(1, 3, H, W)``, same size); the
@@ -582,9 +581,7 @@ def read_steps(
     parameters and, where the example showed them clearly, the staircase parameters
     (:data:`HELD_PARAMS`) that descent should hold (:attr:`wise.optimize.parametric.Settings.held`).
     With ``search``, an estimate the example leaves open is settled by a short discrete search:
-    each candidate descended briefly at :data:`SEARCH_SIDE` pixels, the best kept (seconds).
-    With ``fit``, the parameters that steps read clearly make smooth are then fitted to the
-    example (cartoon: the colour adjustments, :func:`fit_colours_to_levels`; seconds)."""
+    each candidate descended briefly at :data:`SEARCH_SIDE` pixels, the best kept (seconds)."""
     estimate = _ESTIMATES.get(getattr(effect, "name", ""))  # a wrapped effect (a test's) has none
     if estimate is None:
         return params, ()
@@ -598,10 +595,6 @@ def read_steps(
             found = closest(effect, content, example, [given, found])
     if not reading.clear and search and len(reading.candidates) > 1:
         found = best_after_brief_descent(effect, content, example, [given, *reading.candidates])
-    if fit and reading.clear and effect.name in _COLOUR_FITS:
-        # on steps read wrongly the fit pulls the colours away (one trial of the benchmark: 0.97
-        # SSIM without it, 0.92 with it); steps the example leaves open are not fitted to
-        found = _COLOUR_FITS[effect.name](effect, content, example, found)
     held = HELD_PARAMS[effect.name] if reading.clear else ()
     return found.to(device=device, dtype=params.dtype).reshape(params.shape), held
 
@@ -614,13 +607,15 @@ def read_starts(
     side: int = WORKING_SIDE,
 ) -> tuple[list[torch.Tensor], tuple[str, ...]]:
     """The starts of a multi-start descent and the parameters it holds: :func:`read_steps` with
-    ``search`` and ``fit``, and where the steps stay unclear (so that reading was not fitted), the
-    reading with the colours fitted to its levels as a second start. Fitted to a count read wrongly,
-    the colours mislead descent; fitted to one that was nearly right, they lead it to the example
-    (BENCHMARKS.md, "Two starts where the count is unclear"): only a descent from both tells which."""
-    found, held = read_steps(effect, content, example, params, side, search=True, fit=True)
+    ``search``, and where the effect has a fit of the parameters the steps make smooth (cartoon:
+    the colours and the outlines' width, :func:`fit_colours_to_levels`) and it changes them, the
+    reading so fitted as a second start. Fitted to steps or outlines read wrongly, the colours
+    mislead descent; fitted to nearly right ones, they lead it to the example (BENCHMARKS.md, "Two
+    starts where the count is unclear", "Two starts where the steps are clear"): only a descent
+    from both tells which."""
+    found, held = read_steps(effect, content, example, params, side, search=True)
     fit = _COLOUR_FITS.get(getattr(effect, "name", ""))
-    if held or fit is None:
+    if fit is None:
         return [found], held
     small_content, small_example = _working_copy(content.detach(), side), _working_copy(example.detach(), side)
     reading = found.detach().reshape(1, -1).to(small_content)

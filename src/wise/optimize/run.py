@@ -194,7 +194,7 @@ def _read_steps(
     effect: Effect, content: torch.Tensor, target: torch.Tensor, start: torch.Tensor, out: TextIO
 ) -> tuple[list[torch.Tensor], Callable[[torch.Tensor], torch.Tensor] | None, tuple[str, ...]]:
     """The starts with the staircase parameters read off the target (:mod:`wise.optimize.inversion`;
-    said on ``out``; two where the reading stays unclear, :func:`read_starts`), the hook that reads
+    said on ``out``; two where a fit to the steps read changes them, :func:`read_starts`), the hook that reads
     them again between the levels, and the parameters descent holds; for parameter masks the start
     values of every pixel."""
     between = inversion_between_levels(effect, content, target)
@@ -205,6 +205,9 @@ def _read_steps(
     began = time.perf_counter()
     starts, held = read_starts(effect, content, target, start)
     said = describe_estimates(effect, start, starts[0])
+    if len(starts) > 1:
+        fitted = describe_estimates(effect, starts[0], starts[1])
+        said = f"{said or 'nothing'}; fitted to them: {fitted}"
     if said is not None:
         print(f"read off the target: {said} ({time.perf_counter() - began:.1f} s)", file=out, flush=True)
     return starts, between, held
@@ -225,14 +228,14 @@ def _first_level_decides(
         return starts[0]
     side = max(8, min(content.shape[-2:]) // reduction)
     print(
-        f"the reading left two starts: the first level ({settings.iterations} iterations at {side} px) "
-        "runs from each, the closer one goes on",
+        f"two starts, the reading and the reading fitted: the first level ({settings.iterations} iterations "
+        f"at {side} px) runs from each, the closer one goes on",
         file=out,
         flush=True,
     )
     began = time.perf_counter()
     chosen = best_after_brief_descent(effect, content, target, starts, settings, side)
-    which = "the colours fitted to the levels" if chosen is starts[-1] else "the reading as it was"
+    which = "the reading fitted" if chosen is starts[-1] else "the reading as it was"
     print(f"going on from {which} ({time.perf_counter() - began:.1f} s)", file=out, flush=True)
     return chosen
 
