@@ -21,21 +21,17 @@ import torch.nn.functional as F
 
 from wise.filters import gaussian_blur, rgb_to_lab
 from wise.io import read_image
+from wise.metrics import FAR_COLOUR, far_colour_share
 
-FAR = 30.0
 WINDOW = 9
 
 
 def shares(result: torch.Tensor, target: torch.Tensor) -> tuple[float, float]:
-    def lab(image: torch.Tensor) -> torch.Tensor:
-        return rgb_to_lab(gaussian_blur(image, 1.0, scale=1.0))
-
-    made, wanted = lab(result), lab(target)
-    pixelwise = (made - wanted).norm(dim=1) > FAR
+    made, wanted = (rgb_to_lab(gaussian_blur(image, 1.0, scale=1.0)) for image in (result, target))
     pad = WINDOW // 2
     near = F.unfold(F.pad(wanted, (pad,) * 4, mode="replicate"), WINDOW).view(1, 3, WINDOW * WINDOW, *made.shape[-2:])
     nearest = (near - made[:, :, None]).norm(dim=1).min(dim=1).values
-    return float(pixelwise.float().mean()), float((nearest > FAR).float().mean())
+    return far_colour_share(result, target), float((nearest > FAR_COLOUR).float().mean())
 
 
 def main() -> None:

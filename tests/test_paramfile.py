@@ -310,3 +310,19 @@ def test_a_preset_outside_its_range_loads_as_authored_and_bounds_the_span(tmp_pa
     spec = xdog.spec("stroke_width")
     assert notes == [f"{path}: 1 value of stroke_width outside [{authored:g}, {spec.max:g}] clamped to the range"]
     assert float(loaded[0, index]) == pytest.approx(float(xdog.preset("reference_sketch")[index]))
+
+
+def test_masks_fitted_beyond_the_range_within_their_reach_load_as_saved(tmp_path: Path) -> None:
+    oilpaint = effects.create("oilpaint")
+    index = oilpaint.param_names.index("brightness")
+    masks = oilpaint.default_params()[:, None, None].expand(-1, 2, 2).clone()
+    masks[index, 0, 0] = oilpaint.spec("brightness").to_normalized(-0.9)  # a white wall painted dark
+    path = tmp_path / "masks.safetensors"
+    save_params(path, oilpaint, masks)
+    notes: list[str] = []
+    assert torch.allclose(load_params(path, oilpaint, notes=notes)[0], masks) and notes == []
+    masks[index, 0, 0] = oilpaint.spec("brightness").to_normalized(-1.5)  # beyond the reach: clamped to it
+    save_params(path, oilpaint, masks)
+    loaded = load_params(path, oilpaint, notes=notes)
+    assert notes == [f"{path}: 1 value of brightness outside [-1, 1] clamped to the range"]
+    assert oilpaint.spec("brightness").to_real(float(loaded[0, index, 0, 0])) == pytest.approx(-1.0)

@@ -50,3 +50,25 @@ def test_masks_resize_to_the_image() -> None:
     assert maps["a"].shape == (1, 1, 32, 32)
     global_maps = P.real_maps(torch.zeros(1, 3), SPECS, (32, 32))
     assert global_maps["c"].shape == (1, 1, 1, 1) and float(global_maps["c"]) == pytest.approx(15.0)
+
+
+def test_mask_bounds_widen_to_each_reach_and_clamp_in_place() -> None:
+    specs = (ParamSpec("a", 0.0, 2.0, 0.5, reach=(-2.0, 4.0)), ParamSpec("b", -1.0, 1.0, 0.0))
+    low, high = P.mask_bounds(specs, torch.zeros(()))
+    assert low.flatten().tolist() == pytest.approx([-1.5, -0.5]) and high.flatten().tolist() == pytest.approx(
+        [1.5, 0.5]
+    )
+    masks = torch.tensor([-3.0, 3.0, -3.0, 3.0]).view(1, 2, 1, 2)
+    assert P.clamp_masks(masks, specs) is masks
+    assert masks.flatten().tolist() == pytest.approx([-1.5, 1.5, -0.5, 0.5])
+
+
+def test_a_reach_must_contain_the_range() -> None:
+    with pytest.raises(ValueError, match="reach"):
+        ParamSpec("a", 0.0, 2.0, 0.5, reach=(0.5, 4.0))
+
+
+def test_an_edit_moves_a_value_outside_the_range_back_towards_it_but_never_further_out() -> None:
+    before = torch.tensor([-1.2, -1.2, 0.3, 0.3, 0.8])
+    edited = torch.tensor([-1.5, -0.9, 0.7, -0.7, 0.6])
+    assert P.clamp_edit(edited, before).tolist() == pytest.approx([-1.2, -0.9, 0.5, -0.5, 0.6])

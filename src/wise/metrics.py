@@ -10,6 +10,7 @@ import torch.nn.functional as F
 from skimage import color
 from skimage.filters import gaussian
 
+from wise.filters.color import rgb_to_lab
 from wise.filters.gaussian import gaussian_blur
 
 SSIM_SIGMA = 1.5
@@ -47,6 +48,22 @@ def ssim(image: torch.Tensor, reference: torch.Tensor) -> float:
     c1, c2 = SSIM_K1**2, SSIM_K2**2
     score = ((2 * mu_x * mu_y + c1) * (2 * cov + c2)) / ((mu_x * mu_x + mu_y * mu_y + c1) * (var_x + var_y + c2))
     return float(score.mean())
+
+
+FAR_COLOUR = 30.0
+"""CIE Lab distance (ΔE 1976) beyond which a colour reads as another colour."""
+
+
+def far_colour_share(image: torch.Tensor, reference: torch.Tensor, far: float = FAR_COLOUR) -> float:
+    """Share of pixels whose colour is more than ``far`` ΔE (CIE Lab) from the reference's, both
+    ``(1, 3, H, W)`` blurred by 1 px first so that texture and half-pixel shifts do not count."""
+    if image.shape != reference.shape:
+        raise ValueError(f"image {tuple(image.shape)} and reference {tuple(reference.shape)} differ in size")
+
+    def lab(picture: torch.Tensor) -> torch.Tensor:
+        return rgb_to_lab(gaussian_blur(picture.clamp(0.0, 1.0), 1.0, scale=1.0))
+
+    return float(((lab(image) - lab(reference)).norm(dim=1) > far).float().mean())
 
 
 def stroke_orientation(image: torch.Tensor, sigma: float = 4.0) -> torch.Tensor:

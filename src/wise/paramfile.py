@@ -18,9 +18,9 @@ tensor data is read.
 Value policy on loading: NaN or infinite values are refused. Finite values outside
 the effect's declared range are clamped to it, with one warning per file naming the
 parameters, how many values were out of range and the range in real units. The
-range a file may hold is widened to the presets that deliberately sit outside the
-declared range, so a
-saved preset loads and renders as authored (:func:`accepted_span`). Deviations below
+range a file may hold is widened to where masks fitted to a reference may go (the colour
+offsets' reach) and to the presets that deliberately sit outside the declared range, so
+fitted masks and saved presets load and render as made (:func:`accepted_span`). Deviations below
 :data:`RANGE_TOLERANCE` (rounding in a real-space file) are clamped without a
 warning.
 """
@@ -126,9 +126,9 @@ def _effect_name(path: Path, metadata: dict[str, str]) -> str:
 
 def accepted_span(effect: Effect) -> tuple[torch.Tensor, torch.Tensor]:
     """Per parameter, the normalized values a file may hold: the declared range [-0.5, 0.5],
-    widened to the presets that deliberately sit outside it (so a saved preset loads as authored)."""
-    low = torch.full((len(effect.param_specs),), P.NORMALIZED_MIN)
-    high = torch.full((len(effect.param_specs),), P.NORMALIZED_MAX)
+    widened to where fitted masks may go (:func:`wise.params.mask_bounds`) and to the presets that
+    deliberately sit outside it (so a saved preset loads as authored)."""
+    low, high = (bound.flatten() for bound in P.mask_bounds(effect.param_specs, torch.zeros(())))
     for name in effect.presets:
         preset = effect.preset(name).to(torch.float32)
         low, high = torch.minimum(low, preset), torch.maximum(high, preset)

@@ -40,10 +40,15 @@ class ParamSpec:
     max: float
     default: float
     description: str = ""
+    reach: tuple[float, float] | None = None
+    """Where per-pixel masks fitted to a reference may go, in real units (default: ``[min, max]``).
+    Wider for the colour offsets, so that as masks they can give a pixel any colour."""
 
     def __post_init__(self) -> None:
         if not self.max > self.min:
             raise ValueError(f"parameter {self.name!r}: max must exceed min")
+        if self.reach is not None and not self.reach[0] <= self.min < self.max <= self.reach[1]:
+            raise ValueError(f"parameter {self.name!r}: reach must contain [min, max]")
 
     @property
     def span(self) -> float:
@@ -118,6 +123,29 @@ def to_dict(specs: Specs, params: torch.Tensor) -> dict[str, float]:
 def clamp(params: torch.Tensor) -> torch.Tensor:
     """Clamp normalized parameters to the declared ranges."""
     return params.clamp(NORMALIZED_MIN, NORMALIZED_MAX)
+
+
+def mask_bounds(specs: Specs, like: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Normalized lower and upper bounds of per-pixel masks, each ``(1, P, 1, 1)``: the
+    declared ranges, widened to each spec's ``reach``."""
+    reaches = [spec.reach or (spec.min, spec.max) for spec in specs]
+    low = [spec.to_normalized(reach[0]) for spec, reach in zip(specs, reaches)]
+    high = [spec.to_normalized(reach[1]) for spec, reach in zip(specs, reaches)]
+    shape = (1, len(specs), 1, 1)
+    return like.new_tensor(low).view(shape), like.new_tensor(high).view(shape)
+
+
+def clamp_masks(masks: torch.Tensor, specs: Specs) -> torch.Tensor:
+    """``(B, P, h, w)`` normalized masks clamped in place to :func:`mask_bounds`."""
+    low, high = mask_bounds(specs, masks)
+    return torch.maximum(torch.minimum(masks, high, out=masks), low, out=masks)
+
+
+def clamp_edit(edited: torch.Tensor, before: torch.Tensor) -> torch.Tensor:
+    """Normalized values after an edit (a brush stroke, a slider), clamped to the declared range;
+    a value that was outside it (a preset, a fitted colour offset) may move back towards the range
+    but not further out, so an edit never makes it jump."""
+    return torch.maximum(torch.minimum(edited, before.clamp_min(NORMALIZED_MAX)), before.clamp_max(NORMALIZED_MIN))
 
 
 def check_params(params: torch.Tensor, specs: Specs, batch: int) -> torch.Tensor:

@@ -69,3 +69,12 @@ def test_bad_strokes_are_refused(points, radius, hardness, message) -> None:  # 
 def test_unknown_mode_is_refused() -> None:
     with pytest.raises(WiseError, match="brush mode"):
         paint(torch.zeros(4, 4), torch.ones(4, 4), "smudge", 0.1)
+
+
+def test_painting_does_not_pull_a_value_outside_the_range_back_in_one_jump() -> None:
+    mask = torch.tensor([[-1.5, 0.9, 0.0]])  # e.g. colour offsets fitted to a reference
+    weights = torch.ones(1, 3)
+    raised = paint(mask, weights, "increase", 0.2)
+    assert raised[0].tolist() == pytest.approx([-1.3, 0.9, 0.2])  # towards the range, never further out
+    lowered = paint(mask, weights, "decrease", 0.2)
+    assert lowered[0].tolist() == pytest.approx([-1.5, 0.7, -0.2])

@@ -10,6 +10,7 @@ from wise.errors import WiseError
 from wise.filters.smoothing import step_temperature
 from wise.optimize import Settings, optimize
 from wise.optimize.parametric import PYRAMIDS, optimize_coarse_to_fine, optimize_on_crops, pyramid
+from wise.params import mask_bounds
 
 
 @pytest.fixture(scope="module")
@@ -28,7 +29,11 @@ def test_loss_falls_towards_a_reference_of_the_same_effect(content: torch.Tensor
     assert min(outcome.losses[-5:]) < 0.7 * outcome.losses[0]
     expected_shape = (1, len(effect.param_specs)) + ((64, 64) if mode == "local" else ())
     assert outcome.params.shape == expected_shape
-    assert outcome.params.min() >= -0.5 and outcome.params.max() <= 0.5
+    if mode == "global":
+        assert outcome.params.min() >= -0.5 and outcome.params.max() <= 0.5
+    else:
+        low, high = mask_bounds(effect.param_specs, outcome.params)
+        assert bool((outcome.params >= low).all()) and bool((outcome.params <= high).all())
 
 
 def _saturated_start_run(content: torch.Tensor, mode: str) -> tuple[torch.Tensor, torch.Tensor, list[float]]:
@@ -212,3 +217,20 @@ def test_annealing_smooths_the_first_iterations_and_ends_on_the_look_itself(
     assert all(a >= b for a, b in zip(temperatures, temperatures[1:]))
     levels = pyramid(Settings(iterations=30, anneal=0.4))
     assert [level.anneal for _, level in levels] == [0.4, 0.0, 0.0]
+
+
+def test_masks_reach_a_reference_colour_beyond_the_declared_colour_ranges() -> None:
+    # a white wall that the reference paints dark red: brightness must go below its range's -0.2
+    effect = wise.effects.create("oilpaint")
+    content = torch.ones(1, 3, 32, 32)
+    target = torch.tensor([0.45, 0.08, 0.06]).view(1, 3, 1, 1).expand(1, 3, 32, 32)
+    settings = Settings(mode="local", iterations=120, levels=1)
+    outcome = optimize(effect, content, target, effect.default_params(), settings)
+    assert outcome.result is not None
+    assert float((outcome.result - target).abs().mean()) < 0.05
+    brightness = effect.spec("brightness").to_real(
+        float(outcome.params[0, effect.param_names.index("brightness")].mean())
+    )
+    assert brightness < effect.spec("brightness").min - 0.2
+    contrast = outcome.params[0, effect.param_names.index("contrast")]
+    assert contrast.min() >= -0.5 and contrast.max() <= 0.5  # parameters without a reach keep their range

@@ -14,7 +14,7 @@ from typing import Sequence
 import torch
 
 from wise.errors import WiseError
-from wise.params import NORMALIZED_MAX, NORMALIZED_MIN
+from wise.params import clamp_edit
 
 MODES = ("increase", "decrease", "set")
 MAX_POINTS = 4096
@@ -84,7 +84,8 @@ def stroke_weights(
 
 def paint(mask: torch.Tensor, weights: torch.Tensor, mode: str, amount: float) -> torch.Tensor:
     """A normalized mask ``(h, w)`` after a stroke of ``weights``; painted pixels are clamped to
-    the declared range, the others keep their values (a preset may lie outside it).
+    the declared range or, where they lay outside it (a preset, a mask fitted to a reference),
+    kept from going further out; the others keep their values.
 
     ``increase`` / ``decrease`` add / subtract ``amount`` (a fraction of the parameter's
     range) at full weight; ``set`` blends towards the normalized value ``amount``.
@@ -95,4 +96,4 @@ def paint(mask: torch.Tensor, weights: torch.Tensor, mode: str, amount: float) -
         painted = mask + (amount - mask) * weights
     else:
         painted = mask + (amount if mode == "increase" else -amount) * weights
-    return torch.where(weights > 0, painted.clamp(NORMALIZED_MIN, NORMALIZED_MAX), mask)
+    return torch.where(weights > 0, clamp_edit(painted, mask), mask)

@@ -31,7 +31,7 @@ from wise.effects.base import Effect
 from wise.errors import WiseError
 from wise.io import decode_image_bytes, pixel_limit, tensor_to_image, write_image
 from wise.paramfile import effect_of, load_params, save_params
-from wise.params import resize_masks, to_real
+from wise.params import clamp_edit, resize_masks, to_real
 from wise.ppn.predictor import LocalPredictor
 from wise.render import render, rerender
 
@@ -325,7 +325,7 @@ class EditorSession:
                 raise WiseError(f"{param}: {value} is outside its range [{spec.min:g}, {spec.max:g}]")
             mask = self.masks[0, index]
             shifted = mask + (spec.to_normalized(value) - float(mask.mean()))
-            self._commit(index, shifted.clamp(-0.5, 0.5))
+            self._commit(index, clamp_edit(shifted, mask))
 
     def stroke(
         self,

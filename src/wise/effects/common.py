@@ -27,6 +27,10 @@ LUMINANCE_RANGE = 100.0
 """CIE L* of white; luminance is normalized to [0, 1] before the DoG."""
 MAX_STROKE_WIDTH = 1.2
 """Largest ``stroke_width`` (DoG sigma, reference pixels) the effects offer."""
+COLOUR_OFFSET_REACH = (-1.0, 1.0)
+"""Where masks of the colour offsets (brightness, temperature, tint) fitted to a reference may go:
+far enough to take any input colour to any other, so that a reference's colours are reached
+rather than approximated by the most saturated colour the declared ranges allow."""
 DIAGONAL_STEP = math.sqrt(2.0)
 """Longest distance of one pixel step along a direction field."""
 

@@ -21,9 +21,11 @@ class _InwardClamp(torch.autograd.Function):
     @staticmethod
     def backward(ctx, grad: torch.Tensor):  # type: ignore[override]
         (image,) = ctx.saved_tensors
-        # a descent step moves the input by -grad: keep only the steps that head back into range
+        # a descent step moves the input by -grad. Beyond the range, a step further out changes
+        # nothing in the output: it is turned back towards the range, so that a value does not
+        # drift out (an optimizer's momentum would carry it) and has to come all the way back
         outward = ((image > ctx.high) & (grad < 0)) | ((image < ctx.low) & (grad > 0))
-        return grad.masked_fill(outward, 0.0), None, None
+        return torch.where(outward, -grad, grad), None, None
 
 
 @contextmanager
@@ -31,7 +33,10 @@ def inward_gradients(enabled: bool = True) -> Iterator[None]:
     """Within this context, :func:`inward_clamp` passes gradients back into range.
 
     For per-pixel parameter masks: a plain clamp gives saturated pixels no gradient, so a mask
-    that pushed its region to white (brightness, contrast) can never bring it back. Global
+    that pushed its region to white (brightness, contrast) can never bring it back; and a value
+    beyond the range that the loss would push further out is pulled back to it instead, so that
+    masks stay where they still change the picture (BENCHMARKS.md, "Colours the masks could not
+    reach"). Global
     parameters do not need it: every pixel votes on them, and letting the saturated ones vote
     as if unclamped would bias them away from where the others agree.
     """
@@ -45,7 +50,8 @@ def inward_gradients(enabled: bool = True) -> Iterator[None]:
 def inward_clamp(image: torch.Tensor, low: float = 0.0, high: float = 1.0) -> torch.Tensor:
     """``image.clamp(low, high)``; within :func:`inward_gradients` its backward also passes the
     gradient of a value beyond the range when following it (a descent step) moves the value
-    back towards the range. The forward result is always exactly the plain clamp's.
+    back towards the range, and turns it round when it would move the value further out. The
+    forward result is always exactly the plain clamp's.
 
     Args:
         image: any shape.

@@ -24,7 +24,7 @@ from wise.filters._checks import REFERENCE_SHORT_SIDE
 from wise.filters.clamp import inward_gradients
 from wise.filters.gaussian import gaussian_blur
 from wise.filters.smoothing import annealed_temperature, smoothed_steps
-from wise.params import NORMALIZED_MAX, NORMALIZED_MIN, check_params
+from wise.params import NORMALIZED_MAX, NORMALIZED_MIN, check_params, clamp_masks
 from wise.vgg import StyleLoss, load_vgg19
 
 LOSSES = ("l1", "l2", "nst")
@@ -230,7 +230,10 @@ def optimize(
             with torch.no_grad():
                 if params.dim() == 4 and iteration in SMOOTH_AT and iteration < settings.iterations:
                     params.copy_(gaussian_blur(params, MASK_SMOOTHING_SIGMA, scale=1.0))
-                params.clamp_(NORMALIZED_MIN, NORMALIZED_MAX)
+                if params.dim() == 4:
+                    clamp_masks(params, effect.param_specs)
+                else:
+                    params.clamp_(NORMALIZED_MIN, NORMALIZED_MAX)
             _decay_learning_rate(optimizer, iteration)
             value = float(loss.detach())
             outcome.losses.append(value)

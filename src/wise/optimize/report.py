@@ -81,9 +81,15 @@ SHEET_LABEL_HEIGHT = 14
 SHEET_GAP = 4
 
 
+def shown_span(spec: ParamSpec, mask: np.ndarray | torch.Tensor) -> tuple[float, float]:
+    """The span a mask's heat map covers: its parameter's range, widened to the mask's values
+    where they leave it (colour offsets fitted to a reference may)."""
+    return min(spec.min, float(mask.min())), max(spec.max, float(mask.max()))
+
+
 def mask_sheet(params: torch.Tensor, specs: Sequence[ParamSpec], side: int = HEATMAP_SIDE) -> Image.Image:
     """Every mask of normalized ``(1, P, h, w)`` parameters as a heat map over its parameter's
-    range, labelled with its name and range, in rows of four on white."""
+    range (:func:`shown_span`), labelled with its name and that span, in rows of four on white."""
     if params.dim() != 4 or params.shape[:2] != (1, len(specs)):
         raise ValueError(f"mask_sheet needs (1, {len(specs)}, h, w) masks, got {tuple(params.shape)}")
     real = P.to_real(params.detach().to("cpu", torch.float64), specs)[0]
@@ -97,8 +103,9 @@ def mask_sheet(params: torch.Tensor, specs: Sequence[ParamSpec], side: int = HEA
     draw = ImageDraw.Draw(sheet)
     for index, (spec, mask) in enumerate(zip(specs, real)):
         left, top = (index % columns) * pitch[0], (index // columns) * pitch[1]
-        draw.text((left, top), f"{spec.name} [{_num(spec.min)}, {_num(spec.max)}]", fill="black")
-        tile = Image.fromarray(heatmap(mask, spec.min, spec.max)).resize(cell, Image.Resampling.BILINEAR)
+        low, high = shown_span(spec, mask)
+        draw.text((left, top), f"{spec.name} [{_num(low)}, {_num(high)}]", fill="black")
+        tile = Image.fromarray(heatmap(mask, low, high)).resize(cell, Image.Resampling.BILINEAR)
         sheet.paste(tile, (left, top + SHEET_LABEL_HEIGHT))
     return sheet
 
@@ -217,7 +224,8 @@ def _global_params_section(real: np.ndarray, specs: Sequence[ParamSpec]) -> str:
 def _local_params_section(real: np.ndarray, specs: Sequence[ParamSpec]) -> str:
     cards = []
     for spec, mask in zip(specs, real):
-        image = Image.fromarray(heatmap(mask, spec.min, spec.max))
+        low, high = shown_span(spec, mask)
+        image = Image.fromarray(heatmap(mask, low, high))
         scale = HEATMAP_SIDE / max(image.size)
         size = (max(1, round(image.width * scale)), max(1, round(image.height * scale)))
         resample = Image.Resampling.NEAREST if scale >= 1 else Image.Resampling.BILINEAR
@@ -227,7 +235,7 @@ def _local_params_section(real: np.ndarray, specs: Sequence[ParamSpec]) -> str:
             '<div class="card">'
             f"<h3>{name}</h3>"
             f"{image_tag(image, spec.name, 'mask')}"
-            f"{_colour_bar(spec.min, spec.max)}"
+            f"{_colour_bar(low, high)}"
             f'<p class="range">range [{html.escape(_num(spec.min))}, {html.escape(_num(spec.max))}]</p>'
             f'<p class="stats">min {html.escape(_num(float(mask.min())))} · '
             f"mean {html.escape(_num(float(mask.mean())))} · "
