@@ -6,7 +6,9 @@ to ``spec.max`` (linearly), so that optimizers, sliders and networks see the sam
 scale for every parameter.
 
 What a range means: ``[min, max]`` is the range offered to people and to
-optimizers (sliders, ``--set``, random sampling and optimization clamp to it).
+optimizers (sliders, ``--set``, random sampling and optimization clamp to it); per-pixel
+masks fitted to a reference may go as far as a spec's ``reach`` (:func:`mask_bounds`: the
+colour offsets, so that they can give a pixel any colour).
 The mapping itself is linear and defined everywhere, so an effect renders any
 finite value; a preset may deliberately sit outside the declared range (the
 public reference XDoG's sketch values use ``stroke_width`` 0.2 < 0.3) and renders
