@@ -8,8 +8,9 @@ import torch
 
 from wise.effects.base import Effect, RenderContext
 from wise.effects.common import (
-    COLOUR_OFFSET_REACH,
     LUMINANCE_RANGE,
+    WHITE_BALANCE,
+    brightness_spec,
     colour_adjustments,
     detail_sigmas,
     edge_flow,
@@ -35,18 +36,10 @@ class Cartoon(Effect):
 
     name = "cartoon"
     param_specs = (
-        ParamSpec("brightness", -0.3, 0.3, 0.0, "added to the input colours", reach=COLOUR_OFFSET_REACH),
+        brightness_spec(-0.3, 0.3, 0.0),
         ParamSpec("contrast", 0.5, 2.0, 1.1, "contrast of the input around mid-grey"),
         ParamSpec("saturation", 0.0, 3.0, 1.4, "colour saturation"),
-        ParamSpec(
-            "temperature",
-            -0.5,
-            0.5,
-            0.0,
-            "white balance: warmer (positive) or cooler colours",
-            reach=COLOUR_OFFSET_REACH,
-        ),
-        ParamSpec("tint", -0.5, 0.5, 0.0, "white balance: magenta (positive) or green tint", reach=COLOUR_OFFSET_REACH),
+        *WHITE_BALANCE,
         ParamSpec("gamma", 0.5, 2.0, 1.0, "gamma of the input (above 1 brightens mid-tones)"),
         ParamSpec("details", 0.0, 3.0, 1.2, "more detail: less abstraction and finer outlines"),
         ParamSpec("bins", 2.0, 16.0, 8.0, "number of luminance levels"),

@@ -8,7 +8,7 @@ from typing import Mapping
 import torch
 
 from wise.effects.base import Effect, RenderContext
-from wise.effects.common import COLOUR_OFFSET_REACH, LUMINANCE_RANGE, colour_adjustments, detail_sigmas
+from wise.effects.common import LUMINANCE_RANGE, WHITE_BALANCE, brightness_spec, colour_adjustments, detail_sigmas
 from wise.filters import (
     adjust_color,
     coarse_structure_tensor,
@@ -110,18 +110,10 @@ class OilPaint(Effect):
     guide_channels = 3
     tile_pixels = 5_000_000  # about 0.6 KB per pixel of intermediate images: within 4 GB at 4096²
     param_specs = (
-        ParamSpec("brightness", -0.2, 0.3, 0.0, "added to the input colours", reach=COLOUR_OFFSET_REACH),
+        brightness_spec(-0.2, 0.3, 0.0),
         ParamSpec("contrast", 0.5, 2.0, 1.1, "contrast of the input around mid-grey"),
         ParamSpec("saturation", 0.0, 2.5, 1.2, "colour saturation"),
-        ParamSpec(
-            "temperature",
-            -0.5,
-            0.5,
-            0.0,
-            "white balance: warmer (positive) or cooler colours",
-            reach=COLOUR_OFFSET_REACH,
-        ),
-        ParamSpec("tint", -0.5, 0.5, 0.0, "white balance: magenta (positive) or green tint", reach=COLOUR_OFFSET_REACH),
+        *WHITE_BALANCE,
         ParamSpec("details", 0.0, 3.0, 1.5, "more detail: less colour abstraction"),
         ParamSpec("stroke_length", 1.0, 12.0, 5.0, "length of the brush strokes along the flow"),
         ParamSpec("brush_size", 0.3, 3.0, 0.8, "width of the bristle grooves across the strokes"),

@@ -9,7 +9,14 @@ from typing import Mapping
 import torch
 
 from wise.effects.base import Effect, RenderContext
-from wise.effects.common import COLOUR_OFFSET_REACH, LUMINANCE_RANGE, colour_adjustments, detail_sigmas, xdog_lines
+from wise.effects.common import (
+    LUMINANCE_RANGE,
+    WHITE_BALANCE,
+    brightness_spec,
+    colour_adjustments,
+    detail_sigmas,
+    xdog_lines,
+)
 from wise.filters import (
     adjust_color,
     edge_tangent_flow,
@@ -105,18 +112,10 @@ class Watercolor(Effect):
     # and edge darkening: structures at a few reference pixels, lost on the coarse levels' copies
     searched_params = ("abstraction", "flatness", "bleeding", "edge_darkening")
     param_specs = (
-        ParamSpec("brightness", -0.2, 0.3, 0.05, "added to the input colours", reach=COLOUR_OFFSET_REACH),
+        brightness_spec(-0.2, 0.3, 0.05),
         ParamSpec("contrast", 0.5, 2.0, 1.0, "contrast of the input around mid-grey"),
         ParamSpec("saturation", 0.0, 2.0, 1.15, "colour saturation"),
-        ParamSpec(
-            "temperature",
-            -0.5,
-            0.5,
-            0.0,
-            "white balance: warmer (positive) or cooler colours",
-            reach=COLOUR_OFFSET_REACH,
-        ),
-        ParamSpec("tint", -0.5, 0.5, 0.0, "white balance: magenta (positive) or green tint", reach=COLOUR_OFFSET_REACH),
+        *WHITE_BALANCE,
         ParamSpec("abstraction", 1.0, 8.0, 4.0, "radius of the Kuwahara washes"),
         ParamSpec("flatness", 0.0, 1.0, 0.5, "flat washes of even tone (1) or smooth shading (0)"),
         ParamSpec("bleeding", 0.0, 8.0, 3.0, "how far colours bleed across wet edges"),
