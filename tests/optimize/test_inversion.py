@@ -310,3 +310,25 @@ def test_the_outlines_width_is_read_off_the_ink(astronaut: torch.Tensor) -> None
             for p in (start, inversion._with(cartoon, start, **read))
         )
     assert after < 0.5 * before
+
+
+def test_more_contour_and_a_higher_threshold_darken_more(astronaut: torch.Tensor) -> None:
+    cartoon, content, params, _ = _example(astronaut, "cartoon", 96)
+    light = inversion.outline_darkening(cartoon, content, _with(cartoon, params, contour=0.2, blackness=0.02))
+    usual = inversion.outline_darkening(cartoon, content, params)
+    heavy = inversion.outline_darkening(cartoon, content, _with(cartoon, params, contour=3.0, blackness=0.5))
+    assert 0.0 <= light < usual < heavy <= 1.0
+
+
+def test_masks_start_from_no_more_ink_and_no_harder_steps_than_the_start_as_given(astronaut: torch.Tensor) -> None:
+    cartoon, content, given, _ = _example(astronaut, "cartoon", 96)
+    inky = _with(cartoon, given, bins=12.0, softness=0.0, contour=3.0, blackness=0.5, stroke_width=1.2)
+    light = _with(cartoon, given, bins=3.0, softness=0.6, contour=0.1, blackness=0.01)
+    kept_inky, kept_light = inversion.undoable_starts(cartoon, content, [inky, light], given)
+    # the outlines and the ramps go back to the given ones, the rest of the reading stays
+    assert torch.equal(kept_inky, _with(cartoon, inky, softness=0.3, contour=1.0, blackness=0.2, stroke_width=0.6))
+    assert _real(cartoon, kept_inky, "bins") == pytest.approx(12.0)
+    assert kept_light is light
+    xdog = effects.create("xdog")
+    start = xdog.default_params().reshape(1, -1)
+    assert inversion.undoable_starts(xdog, content, [start], start)[0] is start

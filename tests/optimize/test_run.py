@@ -154,3 +154,25 @@ def test_the_time_left_counts_from_the_start_of_descent_not_the_reading() -> Non
     progress.start()
     line = progress.line(levels[0][1].iterations, 0.05, torch.zeros(1, 3, 16, 20))
     assert float(line.split("about ")[1].split(" s left")[0]) < 5.0
+
+
+def test_masks_start_from_the_outlines_and_ramps_as_given_where_the_reading_inks_more_or_steps_harder(
+    images, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import io
+
+    import wise.optimize.run as run_module
+
+    content, target = (read_image(path) for path in images)
+    cartoon = wise.effects.create("cartoon")
+    given = cartoon.default_params().reshape(1, -1)
+    inky = cartoon.params_from_dict({"bins": 4.0, "softness": 0.0, "contour": 3.0, "blackness": 0.5}).reshape(1, -1)
+    monkeypatch.setattr(run_module, "read_starts", lambda *args, **kwargs: ([inky], ("bins",)))
+    said = io.StringIO()
+    starts, _, _ = run_module._read_steps(cartoon, content, target, given, "local", said)
+    assert cartoon.params_to_dict(starts[0][0]) == pytest.approx({**cartoon.params_to_dict(given[0]), "bins": 4.0})
+    assert "descent cannot take ink away or move a plateau" in said.getvalue()
+    said = io.StringIO()
+    starts, _, _ = run_module._read_steps(cartoon, content, target, given, "global", said)
+    assert torch.equal(starts[0], inky)  # one value for the whole picture has its gradient at the edges
+    assert "ink" not in said.getvalue()

@@ -42,7 +42,7 @@ import torch
 import torch.nn.functional as F
 
 from wise.effects.base import Effect
-from wise.effects.common import COLOUR_ADJUSTMENTS, detail_sigmas, edge_response
+from wise.effects.common import COLOUR_ADJUSTMENTS, detail_sigmas, edge_response, xdog_lines
 from wise.filters import rgb_to_lab
 from wise.filters.quantize import MIN_BINS, quantize
 from wise.optimize.parametric import Settings, closest, optimize
@@ -623,6 +623,60 @@ def read_starts(
     if torch.equal(fitted, reading):
         return [found], held
     return [found, fitted.to(device=params.device, dtype=params.dtype).reshape(params.shape)], held
+
+
+OUTLINE_PARAMS: dict[str, tuple[str, ...]] = {"cartoon": ("stroke_width", "contour", "blackness")}
+"""The parameters that draw an effect's outlines over its colours (:func:`outline_darkening`)."""
+
+
+def outline_darkening(effect: Effect, content: torch.Tensor, params: torch.Tensor) -> float:
+    """How much the outlines of ``params`` ``(1, P)`` darken ``content``'s rendering: the mean of
+    one less the ink the outlines multiply over the colours (0: no outlines, 1: black all over)."""
+    with torch.no_grad():
+        p, ctx = effect.real_values(content, params)
+        abstracted, tangent = effect.abstraction(content, p, ctx)
+        ink = xdog_lines(
+            abstracted[:, :1] / 100.0,
+            tangent,
+            p["stroke_width"],
+            p["contour"],
+            p["blackness"],
+            detail_sigmas(p["details"])["edge_smoothing"],
+            effect.kernel_size,
+            ctx.scale,
+        )
+    return float(1.0 - ink.mean())
+
+
+def undoable_starts(
+    effect: Effect, content: torch.Tensor, starts: list[torch.Tensor], given: torch.Tensor, side: int = SEARCH_SIDE
+) -> list[torch.Tensor]:
+    """``starts`` for per-pixel descent, each without what its masks could not undo: the outlines
+    of ``given`` (``(1, P)``) where its own darken ``content`` more (:func:`outline_darkening`, on a
+    copy whose short side is ``side``), and ramps between the levels no narrower than ``given``'s.
+
+    A pixel inked black lies on the flat end of the outlines' threshold, and a pixel on a level's
+    plateau on the flat of the quantizer: their masks get no gradient that would take the ink
+    away or move the luminance. Outlines and hard steps read off a reference that is no cartoon
+    (a neural style transfer: its dark paint, its banded tones) then stay, and descent buys the
+    luminance it cannot reach with invented colours. Ink missing where the reference has some lies
+    on the threshold's slope at the edges, and wider ramps on their slopes, where descent can
+    move them."""
+    if getattr(effect, "name", "") != "cartoon":
+        return starts
+    small = _working_copy(content.detach(), side)
+    given = given.detach().reshape(1, -1).to(small)
+    limit = outline_darkening(effect, small, given)
+    outlines = [effect.param_names.index(name) for name in OUTLINE_PARAMS["cartoon"]]
+    softness = effect.param_names.index("softness")
+    kept = []
+    for start in starts:
+        flat = start.detach().reshape(1, -1).to(small).clone()
+        if outline_darkening(effect, small, flat) > limit:
+            flat[:, outlines] = given[:, outlines]
+        flat[:, softness] = torch.maximum(flat[:, softness], given[:, softness])
+        kept.append(start if torch.equal(flat, start.reshape(1, -1).to(small)) else flat.to(start).reshape(start.shape))
+    return kept
 
 
 def best_after_brief_descent(

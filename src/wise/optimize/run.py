@@ -24,6 +24,7 @@ from wise.optimize.inversion import (
     describe_estimates,
     inversion_between_levels,
     read_starts,
+    undoable_starts,
 )
 from wise.optimize.parametric import Outcome, Settings, describe_levels, optimize_coarse_to_fine, pyramid
 from wise.optimize.report import write_animation, write_report
@@ -168,7 +169,7 @@ def run(
             print(progress.line(iteration, loss, output), file=out, flush=True)
 
     with ctrl_c(out) as interruption:
-        starts, between, held = _read_steps(effect, content, target, start_params.to(device), out)
+        starts, between, held = _read_steps(effect, content, target, start_params.to(device), settings.mode, out)
         levels = tuple((reduction, replace(level, held=held)) for reduction, level in levels)
         start_params = _first_level_decides(effect, content, target, starts, levels[0], out)
         progress.start()
@@ -191,12 +192,13 @@ def run(
 
 
 def _read_steps(
-    effect: Effect, content: torch.Tensor, target: torch.Tensor, start: torch.Tensor, out: TextIO
+    effect: Effect, content: torch.Tensor, target: torch.Tensor, start: torch.Tensor, mode: str, out: TextIO
 ) -> tuple[list[torch.Tensor], Callable[[torch.Tensor], torch.Tensor] | None, tuple[str, ...]]:
     """The starts with the staircase parameters read off the target (:mod:`wise.optimize.inversion`;
     said on ``out``; two where a fit to the steps read changes them, :func:`read_starts`), the hook that reads
     them again between the levels, and the parameters descent holds; for parameter masks the start
-    values of every pixel."""
+    values of every pixel. Parameter masks (``mode`` local) start from no more ink and no harder
+    steps than ``start`` (:func:`undoable_starts`)."""
     between = inversion_between_levels(effect, content, target)
     if between is None or start.dim() > 2:  # masks given to start from are kept as they are
         return [start], None, ()
@@ -210,7 +212,26 @@ def _read_steps(
         said = f"{said or 'nothing'}; fitted to them: {fitted}"
     if said is not None:
         print(f"read off the target: {said} ({time.perf_counter() - began:.1f} s)", file=out, flush=True)
+    if mode == "local":
+        inked = starts
+        starts = _distinct(undoable_starts(effect, content, starts, start))
+        if any(not torch.equal(a, b) for a, b in zip(starts, inked)) or len(starts) < len(inked):
+            print(
+                "the masks start from the outlines and ramps as given where the ones read would ink more "
+                "or step harder: descent cannot take ink away or move a plateau",
+                file=out,
+                flush=True,
+            )
     return starts, between, held
+
+
+def _distinct(starts: list[torch.Tensor]) -> list[torch.Tensor]:
+    """``starts`` without repeats, in order."""
+    kept: list[torch.Tensor] = []
+    for start in starts:
+        if not any(torch.equal(start, other) for other in kept):
+            kept.append(start)
+    return kept
 
 
 def _first_level_decides(
