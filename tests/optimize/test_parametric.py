@@ -188,7 +188,7 @@ def test_crops_recover_a_parameter_at_full_resolution(astronaut: torch.Tensor) -
 def test_crops_take_global_parameters_and_image_losses_only(content: torch.Tensor) -> None:
     effect = wise.effects.create("xdog")
     for settings in (Settings(mode="local", iterations=2), Settings(mode="global", iterations=2, loss="nst")):
-        with pytest.raises(WiseError, match="global|l1 or l2"):
+        with pytest.raises(WiseError, match="global|l1, l1-lab or l2"):
             optimize_on_crops(effect, content, content, effect.default_params(), settings)
 
 
@@ -234,3 +234,18 @@ def test_masks_reach_a_reference_colour_beyond_the_declared_colour_ranges() -> N
     assert brightness < effect.spec("brightness").min - 0.2
     contrast = outcome.params[0, effect.param_names.index("contrast")]
     assert contrast.min() >= -0.5 and contrast.max() <= 0.5  # parameters without a reach keep their range
+
+
+def test_in_lab_a_saturated_colour_does_not_stand_in_for_a_tone() -> None:
+    from wise.optimize.parametric import image_distance
+
+    target = torch.full((1, 3, 4, 4), 0.3)
+    target[:, 2] = 0.45  # a dark grey-blue
+    darker = target - 0.1  # the right hue, a level too dark
+    purple = darker.clone()
+    purple[:, 0] += 0.2  # red and blue raised to make up the tone channel by channel
+    purple[:, 2] += 0.2
+    # in RGB the saturated purple is as close as the dark grey-blue, in Lab it is farther
+    assert float(image_distance("l1", purple, target)) <= float(image_distance("l1", darker, target)) + 1e-6
+    assert float(image_distance("l1-lab", purple, target)) > float(image_distance("l1-lab", darker, target))
+    assert float(image_distance("l1-lab", target, target)) == 0.0

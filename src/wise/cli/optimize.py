@@ -84,7 +84,12 @@ def _add_options(parser: argparse.ArgumentParser) -> None:
         default=Settings.levels,
         help="coarse-to-fine pyramid levels (default %(default)s; 1: every iteration at --size)",
     )
-    parser.add_argument("--loss", choices=LOSSES, default="l1", help="image loss (default l1); nst needs VGG-19")
+    parser.add_argument(
+        "--loss",
+        choices=LOSSES,
+        default=Settings.loss,
+        help="image loss (default l1-lab: L1 in RGB plus half of L1 in CIE Lab); nst needs VGG-19",
+    )
     parser.add_argument("--vgg-weights", metavar="FILE", help="VGG-19 weights (safetensors) for --loss nst")
     parser.add_argument(
         "--tv", type=types.weight, default=0.0, metavar="W", help="total-variation weight on the masks (at least 0)"

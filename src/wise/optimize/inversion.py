@@ -45,7 +45,7 @@ from wise.effects.base import Effect
 from wise.effects.common import COLOUR_ADJUSTMENTS, detail_sigmas, edge_response, xdog_lines
 from wise.filters import rgb_to_lab
 from wise.filters.quantize import MIN_BINS, quantize
-from wise.optimize.parametric import Settings, closest, optimize
+from wise.optimize.parametric import Settings, closest, image_distance, optimize
 from wise.params import NORMALIZED_MAX, NORMALIZED_MIN
 
 WORKING_SIDE = 512
@@ -689,20 +689,19 @@ def best_after_brief_descent(
 ) -> torch.Tensor:
     """The candidate that, descended with ``settings`` (default: :data:`SEARCH_ITERATIONS` global
     iterations with its staircase parameters held) on copies whose short side is ``side``, fits
-    ``example`` best by the settings' loss (L1 or L2), the candidate as it was, not as descended:
-    the full descent follows."""
+    ``example`` best by the settings' loss (:func:`~wise.optimize.parametric.image_distance`), the
+    candidate as it was, not as descended: the full descent follows."""
     small_content, small_example = _working_copy(content, side), _working_copy(example, side)
     if settings is None:
         settings = Settings(
             mode="global", iterations=SEARCH_ITERATIONS, lr=SEARCH_LR, loss="l2", held=HELD_PARAMS[effect.name]
         )
-    power = 1 if settings.loss == "l1" else 2
     losses = []
     for candidate in candidates:
         outcome = optimize(effect, small_content, small_example, candidate, settings)
         with torch.no_grad():
             rendered = effect(small_content, outcome.params).clamp(0.0, 1.0)
-            losses.append(float((rendered - small_example).abs().pow(power).mean()))
+            losses.append(float(image_distance(settings.loss, rendered, small_example)))
     return candidates[losses.index(min(losses))]
 
 

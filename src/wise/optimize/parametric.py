@@ -22,12 +22,15 @@ from wise.effects.base import Effect
 from wise.errors import WiseError
 from wise.filters._checks import REFERENCE_SHORT_SIDE
 from wise.filters.clamp import inward_gradients
+from wise.filters.color import rgb_to_lab
 from wise.filters.gaussian import gaussian_blur
 from wise.filters.smoothing import annealed_temperature, smoothed_steps
 from wise.params import NORMALIZED_MAX, NORMALIZED_MIN, check_params, clamp_masks
 from wise.vgg import StyleLoss, load_vgg19
 
-LOSSES = ("l1", "l2", "nst")
+LOSSES = ("l1-lab", "l1", "l2", "nst")
+LAB_WEIGHT = 0.5
+"""Weight of the CIE Lab term of the ``l1-lab`` loss (Lab divided by 100) beside L1 in RGB."""
 MODES = ("local", "global")
 DECAY = 0.98
 DECAY_EVERY = 5
@@ -56,7 +59,7 @@ class Settings:
     mode: str = "local"
     iterations: int = 350
     lr: float = 0.1
-    loss: str = "l1"
+    loss: str = "l1-lab"
     tv_weight: float = 0.0
     vgg_weights: str | None = None
     """VGG-19 weights (safetensors) for the ``nst`` loss; default location when None."""
@@ -105,26 +108,38 @@ class Outcome:
     interrupted: bool = False
 
 
+def image_distance(kind: str, output: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """The mean distance of ``output`` from ``target`` (both ``(B, 3, H, W)`` RGB): ``l1``, ``l2``,
+    or ``l1-lab``, L1 in RGB plus :data:`LAB_WEIGHT` times L1 in CIE Lab (divided by 100). In
+    RGB alone a pixel whose tone the effect cannot reach (on a quantization plateau) gets closer
+    with a saturated colour that makes up the difference channel by channel; in Lab a colour
+    cannot stand in for a tone. (``nst`` is scored as ``l2`` here.)"""
+    difference = output - target
+    if kind == "l1":
+        return difference.abs().mean()
+    if kind == "l1-lab":
+        lab = (rgb_to_lab(output.clamp(0.0, 1.0)) - rgb_to_lab(target.clamp(0.0, 1.0))) / 100.0
+        return difference.abs().mean() + LAB_WEIGHT * lab.abs().mean()
+    return difference.square().mean()
+
+
 def _image_loss(kind: str, content: torch.Tensor, target: torch.Tensor, vgg_weights: str | None):
-    """The loss as a function of the output: L1, L2, or Gatys' content + style loss (``nst``)
-    with the content photo's features and the target's Gram matrices."""
+    """The loss as a function of the output: :func:`image_distance` from the target, or Gatys'
+    content + style loss (``nst``) with the content photo's features and the target's Gram matrices."""
     if kind == "nst":
         return StyleLoss(load_vgg19(vgg_weights).to(content.device), content, target)
-    if kind == "l1":
-        return lambda output: (output - target).abs().mean()
-    return lambda output: ((output - target) ** 2).mean()
+    return lambda output: image_distance(kind, output, target)
 
 
 def closest(
     effect: Effect, content: torch.Tensor, target: torch.Tensor, candidates: Sequence[torch.Tensor], loss: str = "l2"
 ) -> torch.Tensor:
     """The candidate parameters whose render of ``content`` is closest to ``target`` by ``loss``
-    (``l1`` or ``l2``, the first of equals); a single candidate is returned without rendering."""
+    (:func:`image_distance`, the first of equals); a single candidate is returned without rendering."""
     if len(candidates) == 1:
         return candidates[0]
-    power = 1 if loss == "l1" else 2
     with torch.no_grad():
-        losses = [float((effect(content, c).clamp(0.0, 1.0) - target).abs().pow(power).mean()) for c in candidates]
+        losses = [float(image_distance(loss, effect(content, c).clamp(0.0, 1.0), target)) for c in candidates]
     return candidates[losses.index(min(losses))]
 
 
@@ -347,12 +362,12 @@ def optimize_on_crops(
     the full render), and takes an Adam step on the loss over the region. Details finer than
     a reduced copy can show (brush texture, thin lines) are then fitted where they exist, at
     a fraction of the cost of full-size iterations. The learning rate decays as in
-    :func:`optimize`; L1 or L2 loss.
+    :func:`optimize`; the loss is :func:`image_distance`.
     """
     if settings.mode != "global":
         raise WiseError("optimization on crops fits global parameters only; use mode 'global'")
-    if settings.loss not in ("l1", "l2"):
-        raise WiseError(f"optimization on crops takes the l1 or l2 loss, not {settings.loss!r}")
+    if settings.loss == "nst":
+        raise WiseError("optimization on crops takes the l1, l1-lab or l2 loss, not 'nst'")
     if content.shape != target.shape:
         raise WiseError(f"content {tuple(content.shape)} and target {tuple(target.shape)} differ in size")
     height, width = content.shape[-2:]
@@ -371,8 +386,7 @@ def optimize_on_crops(
             optimizer.zero_grad(set_to_none=True)
             output = effect(content[..., y0:y1, x0:x1], params, scale=scale, origin=(y0, x0))
             region = output[..., top - y0 : top - y0 + crop, left - x0 : left - x0 + crop]
-            difference = region - target[..., top : top + crop, left : left + crop]
-            loss = difference.abs().mean() if settings.loss == "l1" else difference.square().mean()
+            loss = image_distance(settings.loss, region, target[..., top : top + crop, left : left + crop])
             loss.backward()
             _hold(params, effect, settings.held)
             optimizer.step()
