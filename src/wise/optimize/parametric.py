@@ -114,13 +114,15 @@ def image_distance(kind: str, output: torch.Tensor, target: torch.Tensor) -> tor
     RGB alone a pixel whose tone the effect cannot reach (on a quantization plateau) gets closer
     with a saturated colour that makes up the difference channel by channel; in Lab a colour
     cannot stand in for a tone. (``nst`` is scored as ``l2`` here.)"""
-    difference = output - target
-    if kind == "l1":
-        return difference.abs().mean()
     if kind == "l1-lab":
-        lab = (rgb_to_lab(output.clamp(0.0, 1.0)) - rgb_to_lab(target.clamp(0.0, 1.0))) / 100.0
-        return difference.abs().mean() + LAB_WEIGHT * lab.abs().mean()
-    return difference.square().mean()
+        return _l1_lab(output, target, rgb_to_lab(target.clamp(0.0, 1.0)))
+    difference = output - target
+    return difference.abs().mean() if kind == "l1" else difference.square().mean()
+
+
+def _l1_lab(output: torch.Tensor, target: torch.Tensor, target_lab: torch.Tensor) -> torch.Tensor:
+    lab = (rgb_to_lab(output.clamp(0.0, 1.0)) - target_lab) / 100.0
+    return (output - target).abs().mean() + LAB_WEIGHT * lab.abs().mean()
 
 
 def _image_loss(kind: str, content: torch.Tensor, target: torch.Tensor, vgg_weights: str | None):
@@ -128,6 +130,9 @@ def _image_loss(kind: str, content: torch.Tensor, target: torch.Tensor, vgg_weig
     content + style loss (``nst``) with the content photo's features and the target's Gram matrices."""
     if kind == "nst":
         return StyleLoss(load_vgg19(vgg_weights).to(content.device), content, target)
+    if kind == "l1-lab":  # the target's Lab once, not every iteration
+        target_lab = rgb_to_lab(target.clamp(0.0, 1.0))
+        return lambda output: _l1_lab(output, target, target_lab)
     return lambda output: image_distance(kind, output, target)
 
 
