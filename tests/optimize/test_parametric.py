@@ -249,3 +249,26 @@ def test_in_lab_a_saturated_colour_does_not_stand_in_for_a_tone() -> None:
     assert float(image_distance("l1", purple, target)) <= float(image_distance("l1", darker, target)) + 1e-6
     assert float(image_distance("l1-lab", purple, target)) > float(image_distance("l1-lab", darker, target))
     assert float(image_distance("l1-lab", target, target)) == 0.0
+
+
+def test_masks_take_away_ink_the_target_lacks_through_soft_gradients() -> None:
+    # a dark photo below the cartoon's ink threshold is inked black all over: every pixel on
+    # the flat end of the threshold, where its exact gradient is zero
+    effect = wise.effects.create("cartoon")
+    content = 0.08 + 0.02 * torch.rand(1, 3, 32, 32, generator=torch.Generator().manual_seed(0))
+    with torch.no_grad():
+        target = effect(content, effect.params_from_dict({"brightness": 0.3, "gamma": 2.0, "blackness": 0.01})[None])
+        assert float(effect(content, effect.default_params()[None]).max()) < 0.01 < 0.5 < float(target.mean())
+    exact, soft = (
+        optimize(effect, content, target, effect.default_params(), Settings(iterations=30, levels=1, soft_gradients=s))
+        for s in (0.0, 0.5)
+    )
+    assert float(exact.result.max()) < 0.01  # no gradient ever reached the masks
+    assert float((soft.result - target).abs().mean()) < 0.1
+
+
+def test_soft_gradients_default_to_per_pixel_descent() -> None:
+    assert Settings(mode="local").soft_gradients == parametric.MASK_SOFT_GRADIENTS > 0.0
+    assert Settings(mode="global").soft_gradients == 0.0
+    with pytest.raises(WiseError, match="gradient softness"):
+        Settings(soft_gradients=1.5)

@@ -9,7 +9,7 @@ from wise import effects
 from wise.cli import args as types
 from wise.cli.outputs import OutputFolder
 from wise.cli.parser import add_device, add_pixel_limit, add_size, command, device, exit_code
-from wise.optimize.parametric import LOSSES, MODES, PYRAMIDS, Settings
+from wise.optimize.parametric import LOSSES, MASK_SOFT_GRADIENTS, MODES, PYRAMIDS, Settings
 from wise.optimize.run import NST_METHODS, RESULT_FILES, TARGET_FILE, init_is_file
 from wise.optimize.run import run as run_optimization
 from wise.optimize.run import transfer as run_transfer
@@ -24,6 +24,7 @@ def _settings(args: argparse.Namespace) -> Settings:
         tv_weight=args.tv,
         vgg_weights=args.vgg_weights,
         levels=args.levels,
+        soft_gradients=args.soft_gradients,
     )
 
 
@@ -91,6 +92,14 @@ def _add_options(parser: argparse.ArgumentParser) -> None:
         help="image loss (default l1-lab: L1 in RGB plus half of L1 in CIE Lab); nst needs VGG-19",
     )
     parser.add_argument("--vgg-weights", metavar="FILE", help="VGG-19 weights (safetensors) for --loss nst")
+    parser.add_argument(
+        "--soft-gradients",
+        type=types.share,
+        metavar="S",
+        help="render the effect's steps exactly but pass their gradients through a ramp widened by S (0-1), "
+        f"so that masks can take away ink the target lacks (default {MASK_SOFT_GRADIENTS} with --mode local, "
+        "0 with global)",
+    )
     parser.add_argument(
         "--tv", type=types.weight, default=0.0, metavar="W", help="total-variation weight on the masks (at least 0)"
     )

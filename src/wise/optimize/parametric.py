@@ -24,7 +24,7 @@ from wise.filters._checks import REFERENCE_SHORT_SIDE
 from wise.filters.clamp import inward_gradients
 from wise.filters.color import rgb_to_lab
 from wise.filters.gaussian import gaussian_blur
-from wise.filters.smoothing import annealed_temperature, smoothed_steps
+from wise.filters.smoothing import annealed_temperature, smoothed_steps, softened_gradients
 from wise.params import NORMALIZED_MAX, NORMALIZED_MIN, check_params, clamp_masks
 from wise.vgg import StyleLoss, load_vgg19
 
@@ -32,6 +32,12 @@ LOSSES = ("l1-lab", "l1", "l2", "nst")
 LAB_WEIGHT = 0.5
 """Weight of the CIE Lab term of the ``l1-lab`` loss (Lab divided by 100) beside L1 in RGB."""
 MODES = ("local", "global")
+MASK_SOFT_GRADIENTS = 0.5
+"""Surrogate-gradient softness of the steps in per-pixel descent by default
+(:func:`wise.filters.smoothing.softened_gradients`): a pixel inked black lies on the flat end of
+the XDoG threshold, so its masks get no gradient that would take the ink away; through a ramp
+widened this much they do. Global values see enough pixels on the slope to need none
+(BENCHMARKS.md, "Ink that per-pixel descent can take away")."""
 DECAY = 0.98
 DECAY_EVERY = 5
 DECAY_FROM = 50
@@ -76,6 +82,10 @@ class Settings:
     held: tuple[str, ...] = ()
     """Parameters descent leaves where they are (read off the example in closed form,
     :mod:`wise.optimize.inversion`): their gradient is set to zero."""
+    soft_gradients: float | None = None
+    """Surrogate-gradient softness of the steps (0 to 1, :func:`wise.filters.smoothing.softened_gradients`):
+    the look renders exactly, its steps pass gradients as wider ramps. None: :data:`MASK_SOFT_GRADIENTS`
+    for per-pixel masks, 0 for global values."""
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
@@ -94,6 +104,10 @@ class Settings:
             raise WiseError(f"the annealing temperature must be from 0 to 1, got {self.anneal}")
         if self.levels not in PYRAMIDS:
             raise WiseError(f"levels must be one of {', '.join(map(str, PYRAMIDS))}, got {self.levels}")
+        if self.soft_gradients is None:
+            self.soft_gradients = MASK_SOFT_GRADIENTS if self.mode == "local" else 0.0
+        if not 0.0 <= self.soft_gradients <= 1.0:
+            raise WiseError(f"the gradient softness must be from 0 to 1, got {self.soft_gradients}")
 
 
 @dataclass
@@ -238,7 +252,11 @@ def optimize(
             began = time.perf_counter()
             optimizer.zero_grad(set_to_none=True)
             temperature = annealed_temperature(settings.anneal, _progress(settings, iteration, start))
-            with inward_gradients(params.dim() == 4), smoothed_steps(temperature):
+            with (
+                inward_gradients(params.dim() == 4),
+                smoothed_steps(temperature),
+                softened_gradients(settings.soft_gradients),
+            ):
                 output = effect(content, params)
             renders.append(time.perf_counter() - began)
             loss = image_loss(output)
@@ -389,7 +407,8 @@ def optimize_on_crops(
             y0, x0 = max(0, top - context), max(0, left - context)
             y1, x1 = min(height, top + crop + context), min(width, left + crop + context)
             optimizer.zero_grad(set_to_none=True)
-            output = effect(content[..., y0:y1, x0:x1], params, scale=scale, origin=(y0, x0))
+            with softened_gradients(settings.soft_gradients):
+                output = effect(content[..., y0:y1, x0:x1], params, scale=scale, origin=(y0, x0))
             region = output[..., top - y0 : top - y0 + crop, left - x0 : left - x0 + crop]
             loss = image_distance(settings.loss, region, target[..., top : top + crop, left : left + crop])
             loss.backward()

@@ -278,6 +278,7 @@ def _write_results(
     scores = {
         "effect": effect.name,
         "mode": settings.mode,
+        "soft_gradients": settings.soft_gradients,
         "iterations": len(outcome.losses),
         "levels": describe_levels(levels),
         "seconds": round(outcome.seconds, 3),
