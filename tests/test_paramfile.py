@@ -326,3 +326,26 @@ def test_masks_fitted_beyond_the_range_within_their_reach_load_as_saved(tmp_path
     loaded = load_params(path, oilpaint, notes=notes)
     assert notes == [f"{path}: 1 value of brightness outside [-1, 1] clamped to the range"]
     assert oilpaint.spec("brightness").to_real(float(loaded[0, index, 0, 0])) == pytest.approx(-1.0)
+
+
+class Grown(Tiny):
+    """Tiny after a release that added ``delta``."""
+
+    name = "tiny"
+    param_specs = (*Tiny.param_specs, ParamSpec("delta", 0.0, 4.0, 3.0))
+    added_params = ("delta",)
+
+
+@pytest.mark.parametrize("space", ["normalized", "real"])
+def test_a_file_made_before_a_parameter_was_added_loads_with_its_default(tmp_path: Path, space: str) -> None:
+    masks = torch.rand(3, 4, 5) - 0.5 if space == "normalized" else torch.tensor([0.2, 1.0, 15.0])[:, None, None]
+    path = write_raw(tmp_path / "old.safetensors", masks.expand(3, 4, 5).clone(), space=space)
+    notes: list[str] = []
+    loaded = load_params(path, Grown(), notes)
+    assert loaded.shape == (1, 4, 4, 5)
+    assert torch.allclose(loaded[0, :3], masks if space == "normalized" else load_params(path, Tiny())[0])
+    assert torch.allclose(loaded[0, 3], torch.tensor(0.25))  # 3.0 of [0, 4]
+    assert len(notes) == 1 and "delta" in notes[0] and "default" in notes[0]
+    # a parameter that was there from the start is still missing, not defaulted
+    path = write_raw(tmp_path / "m.safetensors", torch.zeros(2), parameters=json.dumps(["alpha", "gamma"]))
+    refused(path, Grown(), "missing parameter(s) beta")

@@ -186,7 +186,8 @@ def load_params(path: PathLike, effect: Effect, notes: list[str] | None = None) 
         raise WiseError(f"{path}: parameters made for effect {made_for!r}, not for {effect.name!r}")
     names = _parse_names(path, metadata)
     expected = effect.param_names
-    missing = [n for n in expected if n not in names]
+    missing = [n for n in expected if n not in names and n not in effect.added_params]
+    defaulted = [n for n in expected if n not in names and n in effect.added_params]
     extra = [n for n in names if n not in expected]
     problems = []
     if missing:
@@ -215,17 +216,40 @@ def load_params(path: PathLike, effect: Effect, notes: list[str] | None = None) 
         raise WiseError(f"{path}: parameters must be floating point, found {values.dtype}")
     values = values.to(torch.float32)
     _check_finite(values, names, str(path))
+    values = _with_defaults(values, names, defaulted, effect, space)
+    names = names + defaulted
     values = values[[names.index(name) for name in expected]].unsqueeze(0)
     if space == "real":
         values = P.to_normalized(values, effect.param_specs)
         _check_finite(values[0], expected, str(path))
     values, note = _clamp(values, effect, path)
+    if defaulted:
+        added = (
+            f"{path}: made before the parameter(s) {', '.join(defaulted)} existed; "
+            "they take their default (the look the file was made with)"
+        )
+        note = added if note is None else f"{added}; {note}"
     if note is not None:
         if notes is not None:
             notes.append(note)
         else:
             warnings.warn(note, WiseWarning, stacklevel=2)
     return values.contiguous()
+
+
+def _with_defaults(
+    values: torch.Tensor, names: list[str], defaulted: list[str], effect: Effect, space: str
+) -> torch.Tensor:
+    """``values`` ``(n, ...)`` with a row per name of ``defaulted`` appended, each the
+    parameter's default in the file's ``space``, filled to the values' shape."""
+    if not defaulted:
+        return values
+    rows = []
+    for name in defaulted:
+        spec = effect.spec(name)
+        default = spec.default if space == "real" else float(P.from_dict((spec,), {})[0])
+        rows.append(torch.full_like(values[:1], default))
+    return torch.cat([values, *rows])
 
 
 def effect_of(path: PathLike) -> str:

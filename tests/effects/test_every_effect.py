@@ -53,9 +53,10 @@ def test_every_parameter_visibly_changes_the_output(name: str, photo: torch.Tens
         for i, spec in enumerate(effect.param_specs):
             low, high = base.clone(), base.clone()
             low[i], high[i] = -0.5, 0.5
-            change = (effect(photo, low[None]) - effect(photo, high[None])).abs().mean()
-            if change < 0.004:
-                weak.append(f"{spec.name} ({float(change):.4f})")
+            change = (effect(photo, low[None]) - effect(photo, high[None])).abs().mean(dim=1)
+            # visible over the picture, or as strokes: a hundredth of it changed by 0.05 (accents)
+            if change.mean() < 0.004 and change.flatten().quantile(0.99) < 0.05:
+                weak.append(f"{spec.name} ({float(change.mean()):.4f} mean)")
     assert not weak, f"{name}: parameters without a visible effect over their range: {weak}"
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -14,6 +15,7 @@ import wise
 from wise import ppn
 from wise.errors import WiseError
 from wise.ppn.modelfile import ModelInfo, builtin_model_path, load_model, model_info, save_model
+from wise.ppn.predictor import Predictor
 
 EFFECTS = ("xdog", "cartoon", "watercolor", "oilpaint")
 
@@ -96,3 +98,29 @@ def test_every_effect_ships_a_small_model_that_loads(effect: str) -> None:
     with torch.no_grad():
         predicted = network(torch.rand(1, 3, info.size, info.size), torch.rand(1, 3, info.size, info.size))
     assert predicted.shape == (1, len(info.parameters)) and float(predicted.abs().max()) <= 0.5
+
+
+def test_a_global_model_made_before_a_parameter_was_added_predicts_it_at_its_default(tmp_path: Path) -> None:
+    effect = wise.effects.create("watercolor")
+    assert "accents" in effect.added_params
+    older = [name for name in effect.param_names if name != "accents"]
+    torch.manual_seed(0)
+    network = ppn.create("simple", len(older))
+    info = ModelInfo("watercolor", "simple", older, size=64, render_size=256, settings={})
+    save_model(tmp_path / "old.safetensors", network, info)
+    photo, example = torch.rand(1, 3, 64, 80), torch.rand(1, 3, 64, 80)
+    predicted = Predictor(tmp_path / "old.safetensors", "watercolor")(photo, example)
+    with torch.no_grad():
+        own = network(photo, example)
+    accents = effect.param_names.index("accents")
+    assert predicted.shape == (1, len(effect.param_names))
+    assert float(predicted[0, accents]) == float(effect.default_params()[accents])
+    assert torch.allclose(predicted[:, [effect.param_names.index(n) for n in older]], own)
+    # a model that lacks a parameter the effect always had is refused
+    save_model(
+        tmp_path / "bad.safetensors",
+        ppn.create("simple", len(older)),
+        replace(info, parameters=older[1:] + ["accents"]),
+    )
+    with pytest.raises(WiseError, match="other parameters"):
+        Predictor(tmp_path / "bad.safetensors", "watercolor")

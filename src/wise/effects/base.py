@@ -73,6 +73,9 @@ class Effect(nn.Module):
     position_dependent: ClassVar[bool] = False
     """Whether the look depends on where a tile sits in the picture (textures fixed to the
     paper), so that tiles with other origins must be rendered apart."""
+    added_params: ClassVar[tuple[str, ...]] = ()
+    """Parameters added after the effect's first release: a parameter file made before them
+    lacks them and loads with their defaults (:func:`wise.paramfile.load_params` says so)."""
     searched_params: ClassVar[tuple[str, ...]] = ()
     """Parameters whose gradient does not lead to their value from afar (a zero gradient at a
     bound, a structure too fine for reduced copies): optimization of global parameters tries a

@@ -60,9 +60,6 @@ CONTOUR_DETAILS = 2.0
 CONTOUR_STROKE = 0.5
 CONTOUR_STRENGTH = 1.0
 CONTOUR_THRESHOLD = 0.25
-FEATURE_ACCENT = 1.0
-"""How much of their darkness the features (eyes, brows, nostrils, lips) lost to the washes is
-put back as darker strokes: a watercolourist leaves them defined."""
 ACCENT_SURROUNDINGS = 5.0
 """Size of a feature's surroundings for the accents (reference pixels): an eye, a nostril."""
 RIM_THRESHOLD = 0.03
@@ -127,7 +124,9 @@ class Watercolor(Effect):
         ParamSpec("gaps_overlaps", -1.0, 1.0, 0.2, "paper gaps (negative) or overlaps (positive) at edges"),
         ParamSpec("paper", 0.0, 1.0, 0.5, "visibility of the paper's grain"),
         ParamSpec("contour", 0.0, 1.0, 0.25, "opacity of the pencil contours"),
+        ParamSpec("accents", 0.0, 1.0, 1.0, "dark features the washes lost (eyes, brows, lips) put back"),
     )
+    added_params = ("accents",)
     presets = {
         "wet": {
             "brightness": 0.06,
@@ -261,7 +260,7 @@ class Watercolor(Effect):
         pigmented = self.recomputed(pigment_density, darkened, density)
         overlapped = self.stage(gaps_overlaps, pigmented, edges, across, p["gaps_overlaps"], dispersion_noise, scale)
         shaded = self.recomputed(paper_shading, overlapped, paper, p["paper"])
-        finished = self.stage(feature_accents, shaded, image, FEATURE_ACCENT, ACCENT_SURROUNDINGS, scale=scale)
+        finished = self.stage(feature_accents, shaded, image, p["accents"], ACCENT_SURROUNDINGS, scale=scale)
 
         if not torch.is_grad_enabled() and float(p["contour"].max()) <= 0.0:
             return finished.clamp(0.0, 1.0)  # invisible contours: skip their cost when rendering

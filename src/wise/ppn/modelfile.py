@@ -176,7 +176,10 @@ def _info(path: Path, metadata: dict[str, str], effect: str | None) -> ModelInfo
     ):
         raise WiseError(f"{path}: the model's network options are not whole numbers or names by name; {TRAIN_ONE}")
     known_names = known.param_names if known is not None else []
-    if parameters != known_names:
+    # a global model trained before a parameter was added predicts the others (the predictor
+    # gives the added one its default)
+    older_names = [name for name in known_names if known is None or name not in known.added_params]
+    if parameters != known_names and not (kind == "global" and parameters == older_names):
         raise WiseError(
             f"{path}: the model predicts other parameters than {model_effect!r} has now; retrain it ({TRAIN_ONE})"
         )

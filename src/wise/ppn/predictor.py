@@ -36,6 +36,7 @@ class Predictor:
         self.network, self.info = load_model(path, effect, "global")
         self.network.to(device)
         self.device = torch.device(device)
+        self.effect = effects.create(self.info.effect)
         if model is None:
             self.info.source = f"builtin:{effect}"
         elif str(model).startswith(BUILTIN_PREFIX):
@@ -46,7 +47,13 @@ class Predictor:
         size = self.info.size
         small_photo = at_short_side(photo, size).to(self.device)
         small_example = at_short_side(example, size).to(self.device)
-        return self.network(small_photo, small_example).float().cpu()
+        predicted = self.network(small_photo, small_example).float().cpu()
+        if len(self.info.parameters) == len(self.effect.param_names):
+            return predicted
+        # a model made before parameters were added: those take their defaults
+        full = self.effect.default_params()[None].expand(predicted.shape[0], -1).clone()
+        full[:, [self.effect.param_names.index(name) for name in self.info.parameters]] = predicted
+        return full
 
 
 class LocalPredictor:
