@@ -63,7 +63,8 @@ def predict_files(
     seconds (:func:`wise.optimize.refine.refine`; None: the network alone), render the content
     with them at full resolution, and write :data:`RESULT_FILES` into ``out_dir``. The
     refinement is kept only when it re-creates the target better (SSIM at full resolution)
-    than the network alone. Returns the metrics: the result's, with the network's under
+    than the network alone; its answer is the steps read off the target where descent from them
+    ended further away. Returns the metrics: the result's, with the network's under
     ``network``."""
     effect = effects.create(effect_name)
     predictor = Predictor(model, effect_name, device)
@@ -90,7 +91,17 @@ def predict_files(
             mode=refine_mode, max_iterations=max_iterations,
         )  # fmt: skip
         interrupted = outcome.interrupted
-        refined_result, refined_scores = _scores(effect, content, target, outcome.params.cpu())
+        refined_params = outcome.params.cpu()
+        refined_result, refined_scores = _scores(effect, content, target, refined_params)
+        # descent on the image loss can end further from the target than the steps it started
+        # from, as read off the target: the refinement's answer is the better of the two
+        descended = True
+        if outcome.read is not None:
+            read_result, read_scores = _scores(effect, content, target, outcome.read.cpu())
+            if read_scores["ssim"] > refined_scores["ssim"]:
+                refined_params, refined_result, refined_scores, descended = (
+                    outcome.read.cpu(), read_result, read_scores, False
+                )  # fmt: skip
         kept = refined_scores["ssim"] >= network_scores["ssim"]
         scores["refinement"] = {
             **refined_scores,
@@ -99,9 +110,10 @@ def predict_files(
             "seconds": round(outcome.seconds, 2),
             "mode": refine_mode,
             "kept": kept,
+            "descent_kept": descended,
         }
         if kept:
-            params, result = outcome.params.cpu(), refined_result
+            params, result = refined_params, refined_result
             scores.update(refined_scores)
             if params.dim() == 2:
                 scores["params"] = effect.params_to_dict(params[0])

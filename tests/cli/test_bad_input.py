@@ -260,6 +260,10 @@ CASES: dict[str, Case] = {
     "train: render size below size": Case(TRAIN + " --size 256 --render-size 128", "below --size 256"),
     "train: window above size": Case(TRAIN + " --size 64 --window 100", "--window 100 must be from 8"),
     "train: too few examples": Case(TRAIN + " --examples 4 --batch 8", "fewer than one global batch"),
+    "train: --param-weight with a parameter loss": Case(
+        TRAIN + " --loss param-l1 --param-weight 0.2", "adds to an image-space loss"
+    ),
+    "train: negative --param-weight": Case(TRAIN + " --param-weight -1", "--param-weight: must be at least 0"),
     "train: backbone for simple": Case(TRAIN + " --backbone-weights {root}/xdog.safetensors", "no ImageNet backbone"),
     # train local, predict and bench with local models
     "train local: missing pairs": Case(LOCAL.replace("/pairs", "/nope"), "not a directory of pairs"),

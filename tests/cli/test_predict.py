@@ -16,11 +16,14 @@ from PIL import Image
 from skimage import data
 
 import wise
+import wise.predict
 from tests.cli.helpers import run_in_process
 from wise import ppn
 from wise.io import read_image
 from wise.optimize.inversion import FITTED_PARAMS, INVERTED_PARAMS
+from wise.optimize.parametric import Outcome
 from wise.optimize.trials import content_at, random_reference
+from wise.paramfile import load_params
 from wise.ppn.modelfile import ModelInfo, save_model
 from wise.ppn.predictor import Predictor
 
@@ -94,6 +97,30 @@ def test_predict_refines_from_the_prediction_within_its_budget(files: dict[str, 
     assert refinement["kept"] == (refinement["ssim"] >= network["ssim"])
     for name in ("params.safetensors", "result.png", "metrics.json", "predicted.safetensors"):
         assert (root / "refined" / name).is_file()
+
+
+def test_predict_keeps_the_steps_read_off_the_target_where_descent_ended_further_away(
+    files: dict[str, Path], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    root = files["root"]
+    cartoon = wise.effects.create("cartoon")
+    read, astray = cartoon.preset("bold")[None], cartoon.default_params()[None]  # the example is the bold preset
+
+    def descent_that_strays(effect, content, target, start, budget, **options):  # noqa: ANN001, ANN003
+        return Outcome(params=astray.clone(), losses=[0.1, 0.2], seconds=0.1, read=read.clone())
+
+    monkeypatch.setattr(wise.predict, "refine", descent_that_strays)
+    scores = wise.predict.predict_files(
+        "cartoon", str(root / "photo.png"), str(root / "example.png"), str(root / "read"),
+        model=str(root / "cartoon-model.safetensors"), out=open(os.devnull, "w"),
+    )  # fmt: skip
+    refinement = scores["refinement"]
+    content, target = read_image(root / "photo.png"), read_image(root / "example.png")
+    read_ssim, astray_ssim = (wise.predict._scores(cartoon, content, target, p)[1]["ssim"] for p in (read, astray))
+    assert read_ssim > astray_ssim + 0.02
+    assert not refinement["descent_kept"] and scores["ssim"] == refinement["ssim"] == pytest.approx(read_ssim)
+    kept = load_params(root / "read" / "params.safetensors", cartoon)
+    assert torch.allclose(kept, read[0], atol=1e-6)
 
 
 def test_predict_refinement_can_be_capped_in_iterations(files: dict[str, Path]) -> None:
@@ -174,10 +201,12 @@ def test_the_built_in_model_predicts_at_512_pixels_within_a_second(effect: str, 
     with torch.no_grad():
         example = model(torch.from_numpy(np.array(photo)).permute(2, 0, 1)[None] / 255.0, model.default_params()[None])
     Image.fromarray((example[0].permute(1, 2, 0).numpy() * 255).round().astype(np.uint8)).save(tmp_path / "ex.png")
+    # the whole command with its default refinement once; the network alone for the others
+    refinement = [] if effect == "xdog" else ["--refine", "0"]
     began = time.perf_counter()
     process = subprocess.run(
         [sys.executable, "-m", "wise", "predict", effect, "--content", str(tmp_path / "photo.png"),
-         "--target", str(tmp_path / "ex.png"), "-o", str(tmp_path / "out")],
+         "--target", str(tmp_path / "ex.png"), "-o", str(tmp_path / "out"), *refinement],
         capture_output=True, text=True, env=_env(), timeout=120,
     )  # fmt: skip
     seconds = time.perf_counter() - began

@@ -11,8 +11,10 @@ from safetensors.torch import save_file
 from torch import nn
 
 from wise.errors import WiseError
+from wise.filters.quantize import quantize
 from wise.ppn import ARCHITECTURES, create
 from wise.ppn.resnet import ResNetPPN
+from wise.ppn.tone import COMB_COUNTS, CURVE_POINTS, TONE_FEATURES, comb_scores, tone_features
 from wise.ppn.weights import fold_batchnorm, load_resnet50, load_vgg11
 
 PARAMS = 7
@@ -127,3 +129,29 @@ def test_statsnet_predicts_the_same_for_a_window_of_a_texture_as_for_the_whole()
         other = network(torch.rand(1, 3, 64, 64), example[..., :64, :64])
     # the same up to the borders of the window (zero padding), unlike another picture
     assert float((on_whole - on_window).abs().max()) < 0.3 * float((on_whole - other).abs().max())
+
+
+def test_tone_features_read_the_tone_curve_and_the_level_count() -> None:
+    generator = torch.Generator().manual_seed(0)
+    photo = torch.rand(1, 3, 64, 64, generator=generator)
+    brighter = tone_features(photo, (photo + 0.2).clamp(0.0, 1.0))
+    darker = tone_features(photo, (photo - 0.2).clamp(0.0, 1.0))
+    lightness = slice(0, CURVE_POINTS)  # the example's L* against the photo's
+    assert bool((brighter[0, lightness] > darker[0, lightness]).all())
+    ramp = torch.rand(1, 1, 1, 4096, generator=generator)
+    for count in (3.0, 7.0, 12.5):
+        levels = quantize(ramp, torch.tensor([count]), torch.tensor([0.0])).reshape(1, -1)
+        scores = comb_scores(levels)[0, : len(COMB_COUNTS)]
+        assert COMB_COUNTS[int(scores.argmax())] == count
+        assert float(scores.max()) > 0.99
+
+
+def test_tonenet_learns_from_the_tone_features_too() -> None:
+    torch.manual_seed(0)
+    network = create("tone", PARAMS)
+    photo = torch.rand(2, 3, 32, 32)
+    with torch.no_grad():
+        before = network(photo, photo)
+        network.head[0].weight[:, -TONE_FEATURES:] += 0.5  # only the weights that read the tone features
+        after = network(photo, photo)
+    assert float((after - before).abs().max()) > 1e-3

@@ -145,3 +145,20 @@ def test_the_cosine_schedule_falls_to_its_floor_at_the_last_step() -> None:
     assert all(a >= b for a, b in zip(rates, rates[1:]))
     constant = GlobalPPN("xdog", "simple", "image-l1", 1e-3, 32)
     assert isinstance(constant.configure_optimizers(), torch.optim.Adam)
+
+
+def test_the_parameter_weight_adds_the_parameter_error_to_the_image_loss() -> None:
+    from wise.train.module import GlobalPPN
+
+    torch.manual_seed(0)
+    plain = GlobalPPN("xdog", "tone", "image-l1", 1e-3, 32)
+    weighted = GlobalPPN("xdog", "tone", "image-l1", 1e-3, 32, param_weight=0.5)
+    weighted.network.load_state_dict(plain.network.state_dict())
+    photo = torch.rand(2, 3, 32, 32)
+    truth = torch.rand(2, len(plain.effect.param_specs)) - 0.5
+    with torch.no_grad():
+        target = plain.effect(photo, truth)
+    batch = {"photo": photo, "example": target, "target": target, "params": truth}
+    (image_loss, param_l1), (total, same_l1) = plain._losses(batch), weighted._losses(batch)
+    assert float(param_l1) > 0.05 and same_l1 == param_l1
+    assert float(total) == pytest.approx(float(image_loss) + 0.5 * float(param_l1), rel=1e-5)

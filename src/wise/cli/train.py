@@ -64,7 +64,7 @@ def run_train_global(args: argparse.Namespace, out: TextIO) -> int:
     for option, folder in (("--images", args.images), ("--val-images", args.val_images)):
         if folder is not None and not Path(folder).is_dir():
             raise WiseError(f"{option} {folder}: not a directory of photos")
-    if args.backbone_weights is not None and args.arch in ("simple", "stats"):
+    if args.backbone_weights is not None and args.arch in ("simple", "stats", "tone"):
         raise WiseError(
             f"--backbone-weights: the {args.arch!r} architecture has no ImageNet backbone; use resnet or multifeature"
         )
@@ -78,6 +78,7 @@ def run_train_global(args: argparse.Namespace, out: TextIO) -> int:
         images=args.images,
         architecture=args.arch,
         loss=args.loss,
+        param_weight=args.param_weight,
         size=args.size,
         render_size=args.render_size,
         window=args.window if args.window is not None else min(DEFAULT_WINDOW, args.size),
@@ -316,6 +317,14 @@ def register(commands: argparse._SubParsersAction) -> None:
     parser.add_argument("-o", "--output", required=True, metavar="RUNDIR", help="folder of the run")
     parser.add_argument("--arch", choices=tuple(ARCHITECTURES), default="simple", help="network (default simple)")
     parser.add_argument("--loss", choices=LOSSES, default="image-l1", help="loss (default image-l1)")
+    parser.add_argument(
+        "--param-weight",
+        type=types.weight,
+        default=0.0,
+        metavar="W",
+        help="add W times the parameter L1 to an image-space loss, for parameters the look leaves ambiguous "
+        "(default 0)",
+    )
     parser.add_argument(
         "--size", type=types.working_size, default=512, metavar="PX", help="the network's input size (default 512)"
     )

@@ -120,6 +120,10 @@ class Outcome:
     result: torch.Tensor | None = None
     seconds: float = 0.0
     interrupted: bool = False
+    read: torch.Tensor | None = None
+    """Where descent started when that was not the given start: the steps read off the target
+    first (:func:`wise.optimize.refine.refine`). Descent on an image loss can leave a reading that
+    fitted better, so the callers compare the two."""
 
 
 def image_distance(kind: str, output: torch.Tensor, target: torch.Tensor) -> torch.Tensor:

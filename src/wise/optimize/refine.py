@@ -80,8 +80,9 @@ def refine(
 ) -> Outcome:
     """Optimize from ``start`` (normalized ``(1, P)``) for about ``budget`` seconds; returns the
     outcome of the last level (its ``result`` at that level's size; render the parameters at
-    the photo's own size with :func:`wise.render.render`). ``max_iterations`` caps the iterations, shared out over
-    the levels (at least one each)."""
+    the photo's own size with :func:`wise.render.render`), with the steps read off the target
+    before descent as its ``read`` where the reading changed the start. ``max_iterations`` caps
+    the iterations, shared out over the levels (at least one each)."""
     if not budget > 0:
         raise WiseError(f"the refinement budget must be positive, got {budget}")
     _compile_kernels(effect, content, start)
@@ -92,9 +93,10 @@ def refine(
     plan = _sides(content)
     per_level = MAX_LEVEL_ITERATIONS if max_iterations is None else max(1, math.ceil(max_iterations / len(plan)))
     # the staircase parameters read off the example, within the budget
-    params, held = start, ()
+    params, held, read = start, (), None
     if start.dim() <= 2 and budget >= INVERSION_MIN_BUDGET:
         params, held = read_steps(effect, content, target, start.reshape(1, -1), side=INVERSION_SIDE)
+        read = None if torch.equal(params, start.reshape(params.shape)) else params
     losses: list[float] = []
     outcome: Outcome | None = None
     seconds_per_pixel = 0.0  # of an iteration and a render at the level before
@@ -124,5 +126,5 @@ def refine(
         if outcome.interrupted:
             break
     if outcome is None:
-        return Outcome(params=params.detach().clone(), seconds=time.perf_counter() - began)
-    return replace(outcome, losses=losses, seconds=time.perf_counter() - began)
+        return Outcome(params=params.detach().clone(), seconds=time.perf_counter() - began, read=read)
+    return replace(outcome, losses=losses, seconds=time.perf_counter() - began, read=read)

@@ -5,6 +5,8 @@ parameters in [-0.5, 0.5]. No training loop here (see :mod:`wise.train`).
 - :class:`SimpleNet`: three convolution stages, one linear layer.
 - :class:`StatsNet`: four convolution stages summarized by global mean and deviation, a
   two-layer head.
+- :class:`ToneNet`: StatsNet whose head also reads the tone curves from photo to example and
+  the comb of the example's levels, computed without learned weights.
 - :class:`ResNetPPN`: ResNet-50 without BatchNorm on both images concatenated, a head per parameter.
 - :class:`MultiFeaturePPN`: VGG-11 on each image, compact and Gram features of every stage, a
   head per parameter.
@@ -27,11 +29,13 @@ from wise.ppn.multifeature import MultiFeaturePPN
 from wise.ppn.resnet import ResNetPPN
 from wise.ppn.simple import SimpleNet
 from wise.ppn.stats import StatsNet
+from wise.ppn.tone import ToneNet
 from wise.ppn.unet import LocalPPN
 
 ARCHITECTURES: dict[str, type[nn.Module]] = {
     "simple": SimpleNet,
     "stats": StatsNet,
+    "tone": ToneNet,
     "resnet": ResNetPPN,
     "multifeature": MultiFeaturePPN,
 }
@@ -40,7 +44,7 @@ LOCAL_ARCHITECTURES: dict[str, type[nn.Module]] = {"unet": LocalPPN}
 
 
 def create(architecture: str, params: int) -> nn.Module:
-    """A network by name (``simple``, ``stats``, ``resnet``, ``multifeature``) predicting ``params`` values."""
+    """A network by name (a key of :data:`ARCHITECTURES`) predicting ``params`` values."""
     if architecture not in ARCHITECTURES:
         raise WiseError(f"unknown architecture {architecture!r}; use one of {', '.join(ARCHITECTURES)}")
     if params < 1:
@@ -64,6 +68,7 @@ __all__ = [
     "ResNetPPN",
     "SimpleNet",
     "StatsNet",
+    "ToneNet",
     "create",
     "create_local",
 ]

@@ -40,10 +40,14 @@ class StatsNet(nn.Module):
         self.stages = nn.ModuleList(stages)
         self.head = nn.Sequential(nn.Linear(2 * (9 + sum(CHANNELS)), HIDDEN), nn.ReLU(), nn.Linear(HIDDEN, params))
 
-    def forward(self, photo: torch.Tensor, example: torch.Tensor) -> torch.Tensor:
+    def statistics(self, photo: torch.Tensor, example: torch.Tensor) -> torch.Tensor:
+        """The mean and deviation of the inputs and of every stage: ``(B, 2 (9 + sum(CHANNELS)))``."""
         x = torch.cat((photo, example, example - photo), dim=1)
         features = [_mean_and_deviation(x)]
         for stage in self.stages:
             x = stage(x)
             features.append(_mean_and_deviation(x))
-        return bounded(self.head(torch.cat(features, dim=1)))
+        return torch.cat(features, dim=1)
+
+    def forward(self, photo: torch.Tensor, example: torch.Tensor) -> torch.Tensor:
+        return bounded(self.head(self.statistics(photo, example)))

@@ -34,6 +34,8 @@ class GlobalPPN(L.LightningModule):
     from that temperature down to 0 over the first half of the run (graduated non-convexity,
     :mod:`wise.filters.smoothing`); validation always measures the look itself.
     ``soft_gradients`` > 0 keeps the look but passes surrogate gradients through the steps.
+    ``param_weight`` > 0 adds that much of the parameter L1 to an image-space loss: where several
+    parameters make nearly the same look, it tells the network which of them the example had.
     """
 
     def __init__(
@@ -46,10 +48,12 @@ class GlobalPPN(L.LightningModule):
         anneal: float = 0.0,
         lr_schedule: str = "constant",
         soft_gradients: float = 0.0,
+        param_weight: float = 0.0,
     ) -> None:
         super().__init__()
         self.save_hyperparameters()
         self.anneal, self.lr_schedule, self.soft_gradients = anneal, lr_schedule, soft_gradients
+        self.param_weight = param_weight
         self.effect = effects.create(effect).requires_grad_(False)
         self.network = ppn.create(architecture, len(self.effect.param_specs))
         self.loss_kind, self.lr = loss, lr
@@ -65,6 +69,8 @@ class GlobalPPN(L.LightningModule):
             if self.loss_kind.startswith("image"):
                 target = batch["target"]
                 loss = prediction_loss(self.loss_kind, predicted, truth, self.effect, photo, target, scale=self.scale)
+                if self.param_weight:
+                    loss = loss + self.param_weight * prediction_loss("param-l1", predicted, truth)
             else:
                 loss = prediction_loss(self.loss_kind, predicted, truth)
         return loss, (predicted.detach() - truth).abs().mean()

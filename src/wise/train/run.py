@@ -92,6 +92,7 @@ def train_global(
         settings.size,
         anneal=settings.anneal,
         soft_gradients=settings.soft_gradients,
+        param_weight=settings.param_weight,
         lr_schedule=settings.lr_schedule,
     )
     if settings.backbone_weights is not None:

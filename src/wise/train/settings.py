@@ -43,6 +43,8 @@ class TrainSettings:
     images: str
     architecture: str = "simple"
     loss: str = "image-l1"
+    param_weight: float = 0.0
+    """Weight of the parameter L1 added to an image-space loss."""
     size: int = 512
     render_size: int = 512
     window: int | None = None
@@ -59,9 +61,9 @@ class TrainSettings:
     """Share of the training examples on dead-leaves pictures instead of photos."""
     augmentation: bool = False
     anneal: float = 0.0
+    """Step temperature of the first training step, lowered to 0 by the middle of the run."""
     soft_gradients: float = 0.0
     """Surrogate-gradient softness of the effect's steps (:func:`wise.filters.smoothing.softened_gradients`)."""
-    """Step temperature of the first training step, lowered to 0 by the middle of the run."""
     workers: int = 0
     """Processes that render the examples of a fresh stream while the steps run."""
     lr_schedule: str = "constant"
@@ -96,6 +98,10 @@ class TrainSettings:
             raise WiseError(f"unknown sampling {self.sampling!r}; use one of {', '.join(SAMPLINGS)}")
         if not 0.0 <= self.procedural <= 1.0:
             raise WiseError(f"the procedural share must be in [0, 1], got {self.procedural}")
+        if not 0.0 <= self.param_weight < float("inf"):
+            raise WiseError(f"--param-weight {self.param_weight} must be a finite number from 0 up")
+        if self.param_weight and not self.loss.startswith("image"):
+            raise WiseError(f"--param-weight adds to an image-space loss; --loss {self.loss} is one already")
         for name in ("anneal", "soft_gradients"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise WiseError(f"--{name.replace('_', '-')} {getattr(self, name)} must be from 0 to 1")
