@@ -23,7 +23,7 @@ from skimage import data
 import wise
 from wise import metrics
 from wise.io import image_to_tensor, tensor_to_image
-from wise.optimize.refine import DEFAULT_BUDGET, refine
+from wise.optimize.refine import DEFAULT_BUDGET, answers, refine
 from wise.ppn.predictor import Predictor, at_short_side
 
 RENDER_SHORT_SIDE = 512
@@ -65,9 +65,9 @@ def main() -> None:
             rendered = effect(photo, predicted).clamp(0, 1)
         outcome = refine(effect, photo, example, predicted, DEFAULT_BUDGET)
         # as wise predict: the steps read off the example where descent from them ended further away
-        answers = [outcome.params] if outcome.read is None else [outcome.params, outcome.read]
         with torch.no_grad():
-            refined = max((effect(photo, p).clamp(0, 1) for p in answers), key=lambda r: metrics.ssim(r, example))
+            renders = [effect(photo, p).clamp(0, 1) for p in answers(outcome)]
+            refined = max(renders, key=lambda r: metrics.ssim(r, example))
         scores = (metrics.ssim(rendered, example), metrics.ssim(refined, example))
         rows.append((effect_name, [_cell(photo), _cell(example), _cell(rendered), _cell(refined)], scores))
     font = ImageFont.load_default()

@@ -19,7 +19,7 @@ import torch
 from wise import effects, metrics
 from wise.effects.base import Effect
 from wise.io import atomic_path, read_image, write_image
-from wise.optimize.refine import DEFAULT_BUDGET, refine
+from wise.optimize.refine import DEFAULT_BUDGET, answers, refine
 from wise.optimize.report import mask_sheet
 from wise.optimize.run import match_target
 from wise.paramfile import save_params
@@ -91,17 +91,9 @@ def predict_files(
             mode=refine_mode, max_iterations=max_iterations,
         )  # fmt: skip
         interrupted = outcome.interrupted
-        refined_params = outcome.params.cpu()
-        refined_result, refined_scores = _scores(effect, content, target, refined_params)
-        # descent on the image loss can end further from the target than the steps it started
-        # from, as read off the target: the refinement's answer is the better of the two
-        descended = True
-        if outcome.read is not None:
-            read_result, read_scores = _scores(effect, content, target, outcome.read.cpu())
-            if read_scores["ssim"] > refined_scores["ssim"]:
-                refined_params, refined_result, refined_scores, descended = (
-                    outcome.read.cpu(), read_result, read_scores, False
-                )  # fmt: skip
+        scored = [(answer.cpu(), *_scores(effect, content, target, answer.cpu())) for answer in answers(outcome)]
+        refined_params, refined_result, refined_scores = max(scored, key=lambda s: s[2]["ssim"])
+        descended = refined_params is scored[0][0]
         kept = refined_scores["ssim"] >= network_scores["ssim"]
         scores["refinement"] = {
             **refined_scores,

@@ -19,7 +19,7 @@ import torch
 
 from wise import effects, metrics
 from wise.optimize.inversion import invert_steps, invertible
-from wise.optimize.refine import refine
+from wise.optimize.refine import answers, refine
 from wise.optimize.trials import PSNR_CAP, Column, mean_of, random_reference, run_trials
 from wise.ppn.predictor import Predictor
 
@@ -70,12 +70,8 @@ def bench_ppn(
             outcome = refine(effect, content, example, predicted, refine_budget)
             if outcome.interrupted:
                 raise KeyboardInterrupt
-            final = outcome.params
-            refined_ssim, refined_psnr = score(content, example, final)
-            if outcome.read is not None:  # as wise predict: the reading where descent ended further away
-                read_ssim, read_psnr = score(content, example, outcome.read)
-                if read_ssim > refined_ssim:
-                    final, refined_ssim, refined_psnr = outcome.read, read_ssim, read_psnr
+            scored = [(answer, *score(content, example, answer)) for answer in answers(outcome)]
+            final, refined_ssim, refined_psnr = max(scored, key=lambda s: s[1])  # as wise predict
             kept = refined_ssim >= ssim
             row["refined"] = {
                 "ssim": refined_ssim if kept else ssim,

@@ -48,6 +48,14 @@ RENDER_SHARE = 1.5
 starts only when that much of the budget is left (estimated from the level before, per pixel)."""
 
 
+def answers(outcome: Outcome) -> list[torch.Tensor]:
+    """The refinement's candidate answers: the descended parameters, then the steps read off the
+    target before descent where the reading changed the start. Descent on the image loss can stray
+    from a reading that was right, so callers keep the one that re-creates the target best
+    (ties to descent)."""
+    return [outcome.params] if outcome.read is None else [outcome.params, outcome.read]
+
+
 def _sides(content: torch.Tensor) -> list[tuple[int, float, float]]:
     """The levels that are smaller than the photo, and the photo itself when it is smaller than
     the finest level."""
