@@ -185,6 +185,18 @@ def test_crops_recover_a_parameter_at_full_resolution(astronaut: torch.Tensor) -
     assert float((outcome.result - target).square().mean()) < 0.5 * float((start - target).square().mean())
 
 
+def test_crops_end_within_their_time_limit_and_can_skip_the_whole_render(astronaut: torch.Tensor) -> None:
+    effect = wise.effects.create("xdog")
+    content = F.interpolate(astronaut, size=(192, 256), mode="area")
+    settings = Settings(mode="global", iterations=10_000, lr=0.05, loss="l2", time_limit=1.0, anneal=0.3)
+    outcome = optimize_on_crops(effect, content, content, effect.default_params(), settings, crop=48, render=False)
+    assert 5 < len(outcome.losses) < 10_000 and outcome.result is None
+    assert outcome.seconds < 1.0 + 0.3
+    rendered = optimize_on_crops(effect, content, content, effect.default_params(), settings, crop=48)
+    assert rendered.result is not None and rendered.result.shape == content.shape
+    assert rendered.seconds < 1.0 + 0.3  # the estimated whole render counted in the limit
+
+
 def test_crops_take_global_parameters_and_image_losses_only(content: torch.Tensor) -> None:
     effect = wise.effects.create("xdog")
     for settings in (Settings(mode="local", iterations=2), Settings(mode="global", iterations=2, loss="nst")):

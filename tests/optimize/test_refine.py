@@ -9,7 +9,7 @@ from skimage import data
 import wise
 from wise import metrics
 from wise.errors import WiseError
-from wise.optimize.refine import refine
+from wise.optimize.refine import GLOBAL_LEVELS, _levels, refine
 from wise.optimize.trials import content_at
 
 
@@ -52,12 +52,12 @@ class _Slow(torch.nn.Module):
         self.effect, self.delay, self.calls = effect, delay, 0
         self.param_specs = effect.param_specs
 
-    def forward(self, image: torch.Tensor, params: torch.Tensor) -> torch.Tensor:
+    def forward(self, image: torch.Tensor, params: torch.Tensor, **where: object) -> torch.Tensor:
         import time
 
         self.calls += 1
         time.sleep(self.delay * (2 if self.calls % 4 == 0 else 1) * image.shape[-2] * image.shape[-1] / 256**2)
-        return self.effect(image, params)
+        return self.effect(image, params, **where)
 
 
 def test_refinement_of_a_slow_case_stays_within_its_budget(photo: torch.Tensor) -> None:
@@ -81,3 +81,13 @@ def test_refinement_starts_from_the_number_of_levels_of_a_cartoon_example(photo:
     outcome = refine(effect, photo, example, start, budget=30.0, max_iterations=1)
     found = effect.params_to_dict(outcome.params[0])
     assert found["bins"] == pytest.approx(4.0, abs=0.3) and found["softness"] < 0.3
+
+
+def test_global_refinement_descends_on_crops_of_a_large_copy_and_whole_small_ones() -> None:
+    large, small = torch.zeros(1, 3, 768, 1024), torch.zeros(1, 3, 200, 300)
+    (level,) = _levels(large, "global")
+    assert level.side == 512 and level.crop == GLOBAL_LEVELS[0].crop
+    (level,) = _levels(small, "global")
+    assert level.side == 200 and level.crop is None and level.share == 1.0
+    assert all(level.crop is None for level in _levels(large, "local"))
+    assert [level.side for level in _levels(small, "local")] == [200]

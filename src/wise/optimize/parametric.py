@@ -381,6 +381,7 @@ def optimize_on_crops(
     generator: torch.Generator | None = None,
     crop: int = CROP_SIZE,
     context: int = CROP_CONTEXT,
+    render: bool = True,
 ) -> Outcome:
     """Global parameters optimized at the working resolution, one random crop per iteration.
 
@@ -389,7 +390,9 @@ def optimize_on_crops(
     the full render), and takes an Adam step on the loss over the region. Details finer than
     a reduced copy can show (brush texture, thin lines) are then fitted where they exist, at
     a fraction of the cost of full-size iterations. The learning rate decays as in
-    :func:`optimize`; the loss is :func:`image_distance`.
+    :func:`optimize`; the loss is :func:`image_distance`; ``settings.time_limit``,
+    ``anneal`` and ``held`` act as there. Without ``render`` the outcome has no ``result``
+    (the whole image is not rendered) and the time limit is the iterations' alone.
     """
     if settings.mode != "global":
         raise WiseError("optimization on crops fits global parameters only; use mode 'global'")
@@ -405,14 +408,20 @@ def optimize_on_crops(
     optimizer = torch.optim.Adam([params], lr=settings.lr)
     outcome = Outcome(params=params.detach())
     start = time.perf_counter()
+    iterations: deque[float] = deque(maxlen=RECENT_ITERATIONS)
+    renders: deque[float] = deque(maxlen=RECENT_ITERATIONS)  # of the whole image, estimated from the crops'
     try:
         for iteration in range(1, settings.iterations + 1):
+            began = time.perf_counter()
             top, left = _random_box((height, width), crop, generator)
             y0, x0 = max(0, top - context), max(0, left - context)
             y1, x1 = min(height, top + crop + context), min(width, left + crop + context)
             optimizer.zero_grad(set_to_none=True)
-            with softened_gradients(settings.soft_gradients):
+            temperature = annealed_temperature(settings.anneal, _progress(settings, iteration, start))
+            with smoothed_steps(temperature), softened_gradients(settings.soft_gradients):
                 output = effect(content[..., y0:y1, x0:x1], params, scale=scale, origin=(y0, x0))
+            rendered = time.perf_counter() - began
+            renders.append(rendered * height * width / ((y1 - y0) * (x1 - x0)) if render else 0.0)
             region = output[..., top - y0 : top - y0 + crop, left - x0 : left - x0 + crop]
             loss = image_distance(settings.loss, region, target[..., top : top + crop, left : left + crop])
             loss.backward()
@@ -423,6 +432,12 @@ def optimize_on_crops(
             _decay_learning_rate(optimizer, iteration)
             outcome.losses.append(float(loss.detach()))
             outcome.params = params.detach().clone()
+            iterations.append(time.perf_counter() - began)
+            if settings.time_limit is not None and _next_would_overrun(settings.time_limit, start, iterations, renders):
+                break
     except KeyboardInterrupt:
         outcome.interrupted = True
+    if not render:
+        outcome.seconds = time.perf_counter() - start
+        return outcome
     return _finished(outcome, effect, content, start)

@@ -1,9 +1,10 @@
 """A short optimization from predicted parameters that fits a time budget.
 
 ``wise predict`` and ``wise bench ppn --refine`` continue from the network's prediction with
-this: global (or per-pixel) parameters optimized coarse to fine on copies of photo and example
-whose short sides are :data:`LEVEL_SIDES`, each level given its share of the budget, the steps
-of the look smoothed at first and sharpened as the budget runs out (graduated non-convexity,
+this: global parameters optimized on random crops of a copy of photo and example whose short side
+is 512 pixels (:data:`GLOBAL_LEVELS`), per-pixel masks coarse to fine on whole copies
+(:data:`LOCAL_LEVELS`), each level given its share of the budget, the steps of the look smoothed
+at first and sharpened as the budget runs out (graduated non-convexity,
 :mod:`wise.filters.smoothing`). A level ends when its share of the time is spent or its
 iterations are done, whichever comes first.
 """
@@ -12,7 +13,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import torch
 import torch.nn.functional as F
@@ -20,13 +21,34 @@ import torch.nn.functional as F
 from wise.effects.base import Effect
 from wise.errors import WiseError
 from wise.optimize.inversion import read_steps
-from wise.optimize.parametric import Outcome, Settings, optimize_coarse_to_fine
+from wise.optimize.parametric import CROP_CONTEXT, Outcome, Settings, optimize_coarse_to_fine, optimize_on_crops
 
-LEVEL_SIDES = ((256, 0.7, 1.0), (512, 0.3, 0.5))
-"""(short side in pixels, share of the budget, factor on the learning rate) per level. No level
-below 256 pixels: an effect rendered on a small copy is another look than its large rendering
-reduced (line widths, texture scales), so coarse levels pull the parameters away from the
-answer (BENCHMARKS.md, "Refinement levels")."""
+
+@dataclass(frozen=True)
+class Level:
+    """A stage of the refinement: descent on copies of photo and example whose short side is
+    ``side`` (the photo's own where that is smaller) for ``share`` of the budget, at ``rate``
+    times :data:`REFINE_LR`; with ``crop``, on one random square of that many pixels per
+    iteration, rendered at the copy's scale and position
+    (:func:`~wise.optimize.parametric.optimize_on_crops`; global parameters only)."""
+
+    side: int
+    share: float
+    rate: float
+    crop: int | None = None
+
+
+GLOBAL_LEVELS = (Level(512, 1.0, 0.5, crop=128),)
+"""Global parameters descend on crops of the 512-pixel copy: the look at the size it is judged
+at, an iteration about a sixth of a whole one, so six times the iterations of the budget.
+Reduced copies cost more than they give: an effect rendered on a small copy is another look
+than its large rendering reduced (line widths, texture scales), so they pull the parameters
+away from the answer (BENCHMARKS.md, "Refinement levels", "Refinement on crops")."""
+LOCAL_LEVELS = (Level(256, 0.7, 1.0), Level(512, 0.3, 0.5))
+"""Per-pixel masks descend on whole copies: a crop would move only its own part of the masks."""
+CROP_MARGIN = 2
+"""A crop level works on crops only where the copy's short side is this many crops and their
+context or more; a smaller copy is descended whole."""
 DEFAULT_BUDGET = 8.0
 """Seconds of refinement by default: with the interpreter's start, the prediction and the
 final rendering, ``wise predict`` then stays within about 15 s at 512 px on a 2-core CPU."""
@@ -56,16 +78,21 @@ def answers(outcome: Outcome) -> list[torch.Tensor]:
     return [outcome.params] if outcome.read is None else [outcome.params, outcome.read]
 
 
-def _sides(content: torch.Tensor) -> list[tuple[int, float, float]]:
-    """The levels that are smaller than the photo, and the photo itself when it is smaller than
-    the finest level."""
+def _levels(content: torch.Tensor, mode: str) -> list[Level]:
+    """The mode's levels that are smaller than the photo, then the photo's own size with the
+    share of those that are not; crops only on copies large enough for them."""
     short = min(content.shape[-2:])
-    levels = [(side, share, rate) for side, share, rate in LEVEL_SIDES if side < short]
-    if len(levels) < len(LEVEL_SIDES):
-        spare = sum(share for side, share, _ in LEVEL_SIDES if side >= short)
-        rate = LEVEL_SIDES[len(levels)][2]
-        levels.append((short, spare, rate))
-    return levels
+    plan = GLOBAL_LEVELS if mode == "global" else LOCAL_LEVELS
+    levels = [level for level in plan if level.side < short]
+    if len(levels) < len(plan):
+        spare = sum(level.share for level in plan if level.side >= short)
+        levels.append(replace(plan[len(levels)], side=short, share=spare))
+    return [
+        level
+        if level.crop is None or CROP_MARGIN * (level.crop + 2 * CROP_CONTEXT) <= level.side
+        else replace(level, crop=None)
+        for level in levels
+    ]
 
 
 def _compile_kernels(effect: Effect, content: torch.Tensor, start: torch.Tensor) -> None:
@@ -87,8 +114,8 @@ def refine(
     loss: str = "l2",
 ) -> Outcome:
     """Optimize from ``start`` (normalized ``(1, P)``) for about ``budget`` seconds; returns the
-    outcome of the last level (its ``result`` at that level's size; render the parameters at
-    the photo's own size with :func:`wise.render.render`), with the steps read off the target
+    outcome of the last level (its ``result`` at that level's size, none after crops; render the
+    parameters at the photo's own size with :func:`wise.render.render`), with the steps read off the target
     before descent as its ``read`` where the reading changed the start. ``max_iterations`` caps
     the iterations, shared out over the levels (at least one each)."""
     if not budget > 0:
@@ -98,7 +125,7 @@ def refine(
     # the first optimizer of a process imports the compiler stack (seconds): inside the budget,
     # but before the levels share it out
     torch.optim.Adam([torch.zeros(1, requires_grad=True)])
-    plan = _sides(content)
+    plan = _levels(content, mode)
     per_level = MAX_LEVEL_ITERATIONS if max_iterations is None else max(1, math.ceil(max_iterations / len(plan)))
     # the staircase parameters read off the example, within the budget
     params, held, read = start, (), None
@@ -108,27 +135,33 @@ def refine(
     losses: list[float] = []
     outcome: Outcome | None = None
     seconds_per_pixel = 0.0  # of an iteration and a render at the level before
-    for index, (side, share, rate) in enumerate(plan):
-        factor = side / min(content.shape[-2:])
+    for index, level in enumerate(plan):
+        factor = level.side / min(content.shape[-2:])
         size = (max(8, round(content.shape[-2] * factor)), max(8, round(content.shape[-1] * factor)))
+        rendered = size[0] * size[1] if level.crop is None else (level.crop + 2 * CROP_CONTEXT) ** 2
         # the level's share of what is left, so that a level that ends early leaves its time to the next
         left = budget - (time.perf_counter() - began)
-        if left <= seconds_per_pixel * size[0] * size[1]:  # not even one iteration would fit
+        if left <= seconds_per_pixel * rendered:  # not even one iteration would fit
             break
         settings = Settings(
             mode=mode,
             iterations=per_level,
-            lr=REFINE_LR * rate,
+            lr=REFINE_LR * level.rate,
             loss=loss,
             levels=1,
-            time_limit=left * share / sum(s for _, s, _ in plan[index:]),
+            time_limit=left * level.share / sum(later.share for later in plan[index:]),
             anneal=REFINE_ANNEAL if index == 0 else 0.0,
             held=held,
         )
         small_content = F.interpolate(content, size=size, mode="area") if factor < 1 else content
         small_target = F.interpolate(target, size=size, mode="area") if factor < 1 else target
-        outcome = optimize_coarse_to_fine(effect, small_content, small_target, params, ((1, settings),))
-        seconds_per_pixel = outcome.seconds / max(1, len(outcome.losses)) * RENDER_SHARE / (size[0] * size[1])
+        if level.crop is None:
+            outcome = optimize_coarse_to_fine(effect, small_content, small_target, params, ((1, settings),))
+        else:
+            outcome = optimize_on_crops(
+                effect, small_content, small_target, params, settings, crop=level.crop, render=False
+            )
+        seconds_per_pixel = outcome.seconds / max(1, len(outcome.losses)) * RENDER_SHARE / rendered
         params = outcome.params
         losses.extend(outcome.losses)
         if outcome.interrupted:
