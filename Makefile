@@ -9,11 +9,13 @@ TORCH_SPEC ?= torch==2.13.0
 
 install: $(VENV)/.installed
 
+# The fused kernels compile for float64 beside float32 (the tests compare them with PyTorch in
+# both); on two or more cores the two compile at once, in the time of one.
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet "$(TORCH_SPEC)"
 	$(BIN)/python -m pip install --quiet -e ".[dev]"
-	$(BIN)/python -m wise.effects.compile
+	$(BIN)/python -m wise.effects.compile float32 float64
 	touch $@
 
 demo: install

@@ -156,12 +156,12 @@ class PaintingStub:
 
 
 def test_size_rate_frames_and_times_are_kept(tmp_path: Path, xdog: Look) -> None:
-    source = make_clip(tmp_path / "clip.mp4", frames=48, width=640, height=360, rate=24)
+    source = make_clip(tmp_path / "clip.mp4", frames=30, width=320, height=180, rate=30)
     output = tmp_path / "styled.mp4"
     result = stylize_video(xdog, source, output)
-    assert result == VideoResult(frames=48, seconds=result.seconds, interrupted=False)
+    assert result == VideoResult(frames=30, seconds=result.seconds, interrupted=False)
     info = probe(output)
-    assert (info.width, info.height, info.frames, info.rate) == (640, 360, 48, Fraction(24))
+    assert (info.width, info.height, info.frames, info.rate) == (320, 180, 30, Fraction(30))
     assert info.duration == pytest.approx(probe(source).duration, abs=1e-3)
     assert [f.time for f in decoded_frames(output)] == pytest.approx([f.time for f in decoded_frames(source)])
     assert leftovers(tmp_path) == []

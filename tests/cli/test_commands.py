@@ -227,13 +227,20 @@ def test_cuda_without_cuda_is_refused(tmp_path: Path, photo: Path, capsys: pytes
 
 def test_refusals_as_subprocess(tmp_path: Path, photo: Path) -> None:
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(SRC), os.environ.get("PYTHONPATH")]))}
-    for case, (argv, output, words) in refusal_cases(tmp_path, photo).items():
-        proc = subprocess.run(
-            [sys.executable, "-m", "wise", *argv], capture_output=True, text=True, env=env, cwd=tmp_path, timeout=120
-        )
-        assert proc.stdout == "", case
-        check_refusal(proc.returncode, proc.stderr, output)
-        assert words in proc.stderr, (case, proc.stderr)
+    cases = refusal_cases(tmp_path, photo)
+    # all at once: each refusal is an interpreter's start, and the cases share nothing
+    processes = {
+        case: subprocess.Popen(
+            [sys.executable, "-m", "wise", *argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+            env=env, cwd=tmp_path,
+        )  # fmt: skip
+        for case, (argv, _, _) in cases.items()
+    }
+    for case, (_, output, words) in cases.items():
+        stdout, stderr = processes[case].communicate(timeout=120)
+        assert stdout == "", case
+        check_refusal(processes[case].returncode, stderr, output)
+        assert words in stderr, (case, stderr)
 
 
 def test_module_entry_point_lists_effects(tmp_path: Path) -> None:

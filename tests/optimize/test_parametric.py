@@ -1,4 +1,5 @@
 import contextlib
+from dataclasses import replace
 
 import pytest
 import torch
@@ -87,7 +88,8 @@ def test_interrupt_keeps_the_state_reached(content: torch.Tensor) -> None:
 
 def test_bad_settings_are_refused() -> None:
     bads = ({"mode": "x"}, {"loss": "x"}, {"iterations": 0}, {"lr": 0.0}, {"tv_weight": -1.0}, {"levels": 9})
-    for bad in (*bads, {"anneal": 1.5}, {"time_limit": 0.0}):
+    limits = ({"anneal": 1.5}, {"time_limit": 0.0}, {"final_lr": 0.0}, {"final_lr": 1.5})
+    for bad in (*bads, *limits):
         with pytest.raises(WiseError):
             Settings(**bad)
 
@@ -195,6 +197,29 @@ def test_crops_end_within_their_time_limit_and_can_skip_the_whole_render(astrona
     rendered = optimize_on_crops(effect, content, content, effect.default_params(), settings, crop=48)
     assert rendered.result is not None and rendered.result.shape == content.shape
     assert rendered.seconds < 1.0 + 0.3  # the estimated whole render counted in the limit
+
+
+def test_crops_lower_the_learning_rate_to_its_final_share_along_a_cosine(
+    content: torch.Tensor, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    rates: list[float] = []
+    step = torch.optim.Adam.step
+
+    def recording(self: torch.optim.Adam, *args: object, **kwargs: object) -> object:
+        rates.append(self.param_groups[0]["lr"])
+        return step(self, *args, **kwargs)
+
+    monkeypatch.setattr(torch.optim.Adam, "step", recording)
+    effect = wise.effects.create("xdog")
+    settings = Settings(mode="global", iterations=60, lr=0.04, loss="l2", final_lr=0.1)
+    optimize_on_crops(effect, content, content, effect.default_params(), settings, crop=32, render=False)
+    assert rates[0] == pytest.approx(0.04, rel=0.01)
+    assert rates[30] == pytest.approx(0.04 * 0.55, rel=0.05)  # half way: half way down
+    assert rates[-1] == pytest.approx(0.04 * 0.1, rel=0.05)
+    assert all(later <= earlier for earlier, later in zip(rates, rates[1:]))
+    rates.clear()
+    optimize_on_crops(effect, content, content, effect.default_params(), replace(settings, final_lr=None), crop=32)
+    assert rates[-1] == pytest.approx(0.04 * parametric.DECAY**2, rel=1e-6)  # the paper's: x 0.98 at 50 and 55
 
 
 def test_crops_take_global_parameters_and_image_losses_only(content: torch.Tensor) -> None:

@@ -11,6 +11,7 @@ cheap and where a step of one mask pixel covers a larger region of the image.
 
 from __future__ import annotations
 
+import math
 import time
 from collections import deque
 from dataclasses import dataclass, field, replace
@@ -87,6 +88,11 @@ class Settings:
     the look renders exactly, its steps pass gradients as wider ramps. None: :data:`MASK_SOFT_GRADIENTS`
     for per-pixel masks, 0 for global values."""
 
+    final_lr: float | None = None
+    """With crops: the learning rate at the end as a share of ``lr``, reached along a half
+    cosine over the progress (iterations or time, as the annealing); the noise of the random
+    crops then settles instead of moving the answer to the last. None: the paper's schedule."""
+
     def __post_init__(self) -> None:
         if self.mode not in MODES:
             raise WiseError(f"unknown mode {self.mode!r}; use one of {', '.join(MODES)}")
@@ -98,6 +104,8 @@ class Settings:
             raise WiseError(f"the learning rate must be positive, got {self.lr}")
         if self.tv_weight < 0:
             raise WiseError(f"the total-variation weight must be at least 0, got {self.tv_weight}")
+        if self.final_lr is not None and not 0 < self.final_lr <= 1:
+            raise WiseError(f"the final learning rate share must be in (0, 1], got {self.final_lr}")
         if self.time_limit is not None and not self.time_limit > 0:
             raise WiseError(f"the time limit must be positive, got {self.time_limit}")
         if not 0.0 <= self.anneal <= 1.0:
@@ -194,6 +202,14 @@ def _decay_learning_rate(optimizer: torch.optim.Optimizer, iteration: int) -> No
             group["lr"] *= DECAY
 
 
+def _cosine_learning_rate(optimizer: torch.optim.Optimizer, settings: Settings, progress: float) -> None:
+    """``settings.lr`` lowered along a half cosine to ``settings.final_lr`` of it at the end."""
+    share = settings.final_lr if settings.final_lr is not None else 1.0
+    factor = share + (1.0 - share) * 0.5 * (1.0 + math.cos(math.pi * min(1.0, progress)))
+    for group in optimizer.param_groups:
+        group["lr"] = settings.lr * factor
+
+
 RECENT_ITERATIONS = 3
 """Iterations whose longest duration predicts the next one's (the longest rather than the average:
 on a busy machine one step can take twice as long as the one before; only recent ones, so that
@@ -255,7 +271,8 @@ def optimize(
         for iteration in range(1, settings.iterations + 1):
             began = time.perf_counter()
             optimizer.zero_grad(set_to_none=True)
-            temperature = annealed_temperature(settings.anneal, _progress(settings, iteration, start))
+            progress = _progress(settings, iteration, start)
+            temperature = annealed_temperature(settings.anneal, progress)
             with (
                 inward_gradients(params.dim() == 4),
                 smoothed_steps(temperature),
@@ -417,7 +434,8 @@ def optimize_on_crops(
             y0, x0 = max(0, top - context), max(0, left - context)
             y1, x1 = min(height, top + crop + context), min(width, left + crop + context)
             optimizer.zero_grad(set_to_none=True)
-            temperature = annealed_temperature(settings.anneal, _progress(settings, iteration, start))
+            progress = _progress(settings, iteration, start)
+            temperature = annealed_temperature(settings.anneal, progress)
             with smoothed_steps(temperature), softened_gradients(settings.soft_gradients):
                 output = effect(content[..., y0:y1, x0:x1], params, scale=scale, origin=(y0, x0))
             rendered = time.perf_counter() - began
@@ -429,7 +447,10 @@ def optimize_on_crops(
             optimizer.step()
             with torch.no_grad():
                 params.clamp_(NORMALIZED_MIN, NORMALIZED_MAX)
-            _decay_learning_rate(optimizer, iteration)
+            if settings.final_lr is None:
+                _decay_learning_rate(optimizer, iteration)
+            else:
+                _cosine_learning_rate(optimizer, settings, _progress(settings, iteration + 1, start))
             outcome.losses.append(float(loss.detach()))
             outcome.params = params.detach().clone()
             iterations.append(time.perf_counter() - began)

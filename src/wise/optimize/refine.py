@@ -59,6 +59,15 @@ REFINE_LR = 0.05
 refinement starts near the answer."""
 REFINE_ANNEAL = 0.3
 """Step temperature at the start of the coarsest level."""
+REFINE_LOSSES = {"global": "l1", "local": "l2"}
+"""The image loss of each mode by default. L1 for global parameters: where a step or a line sits
+a pixel off, L2 favours the blurred compromise (fewer, softer levels; greyer lines) that a
+painter would not call the example (BENCHMARKS.md, "The loss of the crops"); masks keep L2, as
+measured for them."""
+REFINE_FINAL_LR = 0.1
+"""Learning rate at the end of a crop level, as a share of its start (a half cosine over the
+budget): the random crops' noise settles instead of moving the answer at the last iterations
+(BENCHMARKS.md, "The learning rate of the crops")."""
 INVERSION_SIDE = 128
 """Short side at which the staircase parameters are read off the example before the levels
 (:func:`wise.optimize.inversion.read_steps`): the luminance plateaus show at any size, and at
@@ -111,15 +120,17 @@ def refine(
     budget: float = DEFAULT_BUDGET,
     mode: str = "global",
     max_iterations: int | None = None,
-    loss: str = "l2",
+    loss: str | None = None,
 ) -> Outcome:
     """Optimize from ``start`` (normalized ``(1, P)``) for about ``budget`` seconds; returns the
     outcome of the last level (its ``result`` at that level's size, none after crops; render the
     parameters at the photo's own size with :func:`wise.render.render`), with the steps read off the target
     before descent as its ``read`` where the reading changed the start. ``max_iterations`` caps
-    the iterations, shared out over the levels (at least one each)."""
+    the iterations, shared out over the levels (at least one each); ``loss`` defaults to the
+    mode's (:data:`REFINE_LOSSES`)."""
     if not budget > 0:
         raise WiseError(f"the refinement budget must be positive, got {budget}")
+    loss = loss if loss is not None else REFINE_LOSSES.get(mode, "l2")
     _compile_kernels(effect, content, start)
     began = time.perf_counter()
     # the first optimizer of a process imports the compiler stack (seconds): inside the budget,
@@ -152,6 +163,7 @@ def refine(
             time_limit=left * level.share / sum(later.share for later in plan[index:]),
             anneal=REFINE_ANNEAL if index == 0 else 0.0,
             held=held,
+            final_lr=REFINE_FINAL_LR if level.crop is not None else None,  # whole copies: the paper's decay
         )
         small_content = F.interpolate(content, size=size, mode="area") if factor < 1 else content
         small_target = F.interpolate(target, size=size, mode="area") if factor < 1 else target
