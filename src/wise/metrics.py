@@ -7,8 +7,6 @@ import math
 import numpy as np
 import torch
 import torch.nn.functional as F
-from skimage import color
-from skimage.filters import gaussian
 
 from wise.filters.color import rgb_to_lab
 from wise.filters.gaussian import gaussian_blur
@@ -104,6 +102,8 @@ FEATURE_BLUR = 1.0
 
 def lightness(image: np.ndarray) -> np.ndarray:
     """CIE L* of an (H, W, 3) uint8 picture."""
+    from skimage import color  # here, not at the top: scikit-image's import would slow every command's start
+
     return color.rgb2lab(image.astype(np.float64) / 255.0)[..., 0]
 
 
@@ -118,6 +118,8 @@ def face_measures(rendered: np.ndarray, photo: np.ndarray, box: tuple[int, int, 
       lips), both pictures blurred by sigma 1 px, the face's median minus the mean of those
       pixels, render over photo: 1 means the features are as defined as in the photo.
     """
+    from skimage.filters import gaussian  # as in lightness()
+
     top, bottom, left, right = box
     photo_l, render_l = lightness(photo), lightness(rendered)
     face_photo, face_render = photo_l[top:bottom, left:right], render_l[top:bottom, left:right]

@@ -199,8 +199,9 @@ def test_crops_end_within_their_time_limit_and_can_skip_the_whole_render(astrona
     assert rendered.seconds < 1.0 + 0.3  # the estimated whole render counted in the limit
 
 
-def test_crops_lower_the_learning_rate_to_its_final_share_along_a_cosine(
-    content: torch.Tensor, monkeypatch: pytest.MonkeyPatch
+@pytest.mark.parametrize("on_crops", [True, False])
+def test_the_learning_rate_falls_to_its_final_share_along_a_cosine(
+    content: torch.Tensor, monkeypatch: pytest.MonkeyPatch, on_crops: bool
 ) -> None:
     rates: list[float] = []
     step = torch.optim.Adam.step
@@ -211,14 +212,21 @@ def test_crops_lower_the_learning_rate_to_its_final_share_along_a_cosine(
 
     monkeypatch.setattr(torch.optim.Adam, "step", recording)
     effect = wise.effects.create("xdog")
-    settings = Settings(mode="global", iterations=60, lr=0.04, loss="l2", final_lr=0.1)
-    optimize_on_crops(effect, content, content, effect.default_params(), settings, crop=32, render=False)
+    settings = Settings(mode="global", iterations=60, lr=0.04, loss="l2", levels=1, final_lr=0.1)
+
+    def run(settings: Settings) -> None:
+        if on_crops:
+            optimize_on_crops(effect, content, content, effect.default_params(), settings, crop=32, render=False)
+        else:
+            optimize(effect, content, content, effect.default_params(), settings)
+
+    run(settings)
     assert rates[0] == pytest.approx(0.04, rel=0.01)
     assert rates[30] == pytest.approx(0.04 * 0.55, rel=0.05)  # half way: half way down
     assert rates[-1] == pytest.approx(0.04 * 0.1, rel=0.05)
     assert all(later <= earlier for earlier, later in zip(rates, rates[1:]))
     rates.clear()
-    optimize_on_crops(effect, content, content, effect.default_params(), replace(settings, final_lr=None), crop=32)
+    run(replace(settings, final_lr=None))
     assert rates[-1] == pytest.approx(0.04 * parametric.DECAY**2, rel=1e-6)  # the paper's: x 0.98 at 50 and 55
 
 

@@ -89,9 +89,9 @@ class Settings:
     for per-pixel masks, 0 for global values."""
 
     final_lr: float | None = None
-    """With crops: the learning rate at the end as a share of ``lr``, reached along a half
-    cosine over the progress (iterations or time, as the annealing); the noise of the random
-    crops then settles instead of moving the answer to the last. None: the paper's schedule."""
+    """The learning rate at the end as a share of ``lr``, reached along a half cosine over the
+    progress (iterations or time, as the annealing): the noise of random crops then settles
+    instead of moving the answer at the last iterations. None: the paper's schedule."""
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
@@ -202,10 +202,14 @@ def _decay_learning_rate(optimizer: torch.optim.Optimizer, iteration: int) -> No
             group["lr"] *= DECAY
 
 
-def _cosine_learning_rate(optimizer: torch.optim.Optimizer, settings: Settings, progress: float) -> None:
-    """``settings.lr`` lowered along a half cosine to ``settings.final_lr`` of it at the end."""
-    share = settings.final_lr if settings.final_lr is not None else 1.0
-    factor = share + (1.0 - share) * 0.5 * (1.0 + math.cos(math.pi * min(1.0, progress)))
+def _schedule_learning_rate(optimizer: torch.optim.Optimizer, settings: Settings, iteration: int, start: float) -> None:
+    """After ``iteration``: the paper's decay, or with ``settings.final_lr`` the learning rate
+    lowered along a half cosine over the progress to that share of ``settings.lr`` at the end."""
+    if settings.final_lr is None:
+        _decay_learning_rate(optimizer, iteration)
+        return
+    progress = min(1.0, _progress(settings, iteration + 1, start))
+    factor = settings.final_lr + (1.0 - settings.final_lr) * 0.5 * (1.0 + math.cos(math.pi * progress))
     for group in optimizer.param_groups:
         group["lr"] = settings.lr * factor
 
@@ -271,8 +275,7 @@ def optimize(
         for iteration in range(1, settings.iterations + 1):
             began = time.perf_counter()
             optimizer.zero_grad(set_to_none=True)
-            progress = _progress(settings, iteration, start)
-            temperature = annealed_temperature(settings.anneal, progress)
+            temperature = annealed_temperature(settings.anneal, _progress(settings, iteration, start))
             with (
                 inward_gradients(params.dim() == 4),
                 smoothed_steps(temperature),
@@ -293,7 +296,7 @@ def optimize(
                     clamp_masks(params, effect.param_specs)
                 else:
                     params.clamp_(NORMALIZED_MIN, NORMALIZED_MAX)
-            _decay_learning_rate(optimizer, iteration)
+            _schedule_learning_rate(optimizer, settings, iteration, start)
             value = float(loss.detach())
             outcome.losses.append(value)
             outcome.params = params.detach().clone()
@@ -434,8 +437,7 @@ def optimize_on_crops(
             y0, x0 = max(0, top - context), max(0, left - context)
             y1, x1 = min(height, top + crop + context), min(width, left + crop + context)
             optimizer.zero_grad(set_to_none=True)
-            progress = _progress(settings, iteration, start)
-            temperature = annealed_temperature(settings.anneal, progress)
+            temperature = annealed_temperature(settings.anneal, _progress(settings, iteration, start))
             with smoothed_steps(temperature), softened_gradients(settings.soft_gradients):
                 output = effect(content[..., y0:y1, x0:x1], params, scale=scale, origin=(y0, x0))
             rendered = time.perf_counter() - began
@@ -447,10 +449,7 @@ def optimize_on_crops(
             optimizer.step()
             with torch.no_grad():
                 params.clamp_(NORMALIZED_MIN, NORMALIZED_MAX)
-            if settings.final_lr is None:
-                _decay_learning_rate(optimizer, iteration)
-            else:
-                _cosine_learning_rate(optimizer, settings, _progress(settings, iteration + 1, start))
+            _schedule_learning_rate(optimizer, settings, iteration, start)
             outcome.losses.append(float(loss.detach()))
             outcome.params = params.detach().clone()
             iterations.append(time.perf_counter() - began)
