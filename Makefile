@@ -21,8 +21,12 @@ $(VENV)/.installed: pyproject.toml
 demo: install
 	$(BIN)/python -m wise.demo --out out
 
+# The tests run in parallel, one process per core (at most 4), each on one thread; a test file
+# stays in one process, so the Ray and Lightning ones start their clusters once.
+TEST_WORKERS ?= $(shell n=$$(nproc 2>/dev/null || echo 1); [ "$$n" -gt 4 ] && n=4; echo $$n)
+
 test: install
-	$(BIN)/python -m pytest -q
+	OMP_NUM_THREADS=1 $(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile
 
 # The web editor on the demo's result (made first when missing): open http://127.0.0.1:8000/
 edit: install

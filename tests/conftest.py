@@ -1,3 +1,4 @@
+import os
 import signal
 import subprocess
 import sys
@@ -22,6 +23,8 @@ def pytest_sessionstart(session: pytest.Session) -> None:
         # started in the background by a shell without job control: the Ctrl-C tests need it back
         signal.signal(signal.SIGINT, signal.default_int_handler)
     if fused.requested() != "fused" or not fused.numba_available():
+        return
+    if os.environ.get("PYTEST_XDIST_WORKER"):  # the controller compiled before it started the workers
         return
     cache = Path(fused.__file__).parent / "__pycache__"
     if len(list(cache.glob("*.nbc"))) < COMPILED_KERNELS:
