@@ -22,6 +22,7 @@ from wise.optimize.inversion import (
     staircase_fit,
     unquantized_bounds,
     xdog_threshold_from_ink,
+    xdog_tone_from_shading,
 )
 from wise.optimize.parametric import Settings, optimize_coarse_to_fine
 from wise.train.procedural import dead_leaves
@@ -151,6 +152,56 @@ def test_xdog_threshold_and_shading_are_read_off_its_drawing(astronaut: torch.Te
     with torch.no_grad():
         assert float((xdog(content, found) - example).abs().mean()) < 0.002
     assert _real(xdog, invert_steps(xdog, content, example, truth), "contour") == pytest.approx(2.0, abs=0.05)
+
+
+def test_xdog_tone_is_read_off_the_shading_between_its_lines(
+    astronaut: torch.Tensor, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    truth_tone = {"brightness": 0.05, "contrast": 2.6, "saturation": 2.5, "shading": 0.6}
+    xdog, content, truth, example = _example(astronaut, "xdog", 128, **truth_tone)
+    start = xdog.default_params().reshape(1, -1)  # contrast 1.15, saturation 1.02, shading 0.5
+    tone = xdog_tone_from_shading(xdog, content, example, start)
+    assert tone is not None
+    assert tone["shading"] == pytest.approx(0.6, abs=0.08)
+    assert tone["contrast"] == pytest.approx(2.6, abs=0.4)
+    assert tone["brightness"] == pytest.approx(0.05, abs=0.1)
+    assert tone["saturation"] > 1.7  # strong saturation clips, so its exact value shows little
+    found = invert_steps(xdog, content, example, start)
+    assert _real(xdog, found, "contrast") == pytest.approx(tone["contrast"])
+    monkeypatch.setattr(inversion, "xdog_tone_from_shading", lambda *args, **kwargs: None)
+    lines_only = invert_steps(xdog, content, example, start)
+    with torch.no_grad():
+        error, error_lines_only = (float((xdog(content, p) - example).abs().mean()) for p in (found, lines_only))
+    assert error < 0.5 * error_lines_only
+
+
+def test_xdog_abstraction_is_read_with_the_tone(astronaut: torch.Tensor) -> None:
+    xdog, content, _, example = _example(astronaut, "xdog", 128, details=3.0, contrast=2.0, shading=0.7)
+    start = _with(xdog, xdog.default_params().reshape(1, -1), details=0.5)
+    tone = xdog_tone_from_shading(xdog, content, example, start, details=True)
+    assert tone is not None and tone["details"] >= 2.25
+    assert "details" not in (xdog_tone_from_shading(xdog, content, example, start) or {})
+
+
+def test_several_readings_are_judged_at_the_examples_size(
+    astronaut: torch.Tensor, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    xdog, content, _, example = _example(astronaut, "xdog", 192, contrast=2.0, shading=0.7)
+    judged = []
+    closest = inversion.closest
+
+    def recording(effect, content, target, candidates, loss="l2"):
+        judged.append((content.shape[-1], len(candidates)))
+        return closest(effect, content, target, candidates, loss)
+
+    monkeypatch.setattr(inversion, "closest", recording)
+    read_steps(xdog, content, example, xdog.default_params().reshape(1, -1), side=64)
+    assert judged[-1] == (192, 4)  # the start, the lines read, the tone read at two abstractions
+
+
+def test_lines_on_white_leave_no_tone_to_read(astronaut: torch.Tensor) -> None:
+    xdog, content, _, example = _example(astronaut, "xdog", 96, shading=0.0, contour=2.0)
+    assert xdog_tone_from_shading(xdog, content, example, xdog.default_params().reshape(1, -1)) is None
 
 
 def test_an_estimate_that_fits_worse_is_not_taken(astronaut: torch.Tensor) -> None:

@@ -15,9 +15,12 @@ nowhere useful until the steps line up, and descent settles in a local minimum (
   response ``u = u0 + contour u1`` of :func:`wise.effects.common.edge_response` lies below
   ``blackness``. ``u0`` and ``u1`` are computed from the content once; for each ``contour`` of a
   grid, ``blackness`` is the quantile of ``u`` at the example's ink share, and the contour whose
-  ink covers the example's best is kept (:func:`xdog_threshold_from_ink`). A cartoon's outlines
-  are read the same way, its ink being the pixels much darker than the colour around them; with
-  the colours fitted, their width too (the one whose ink overlaps the example's most).
+  ink covers the example's best is kept (:func:`xdog_threshold_from_ink`). Between the lines the
+  shading also shows the tone: the colour adjustments whose luminance the example's values follow
+  best, ``s`` by least squares for each (:func:`xdog_tone_from_shading`), give a second reading,
+  and renders at the example's size decide. A cartoon's outlines are read the same way, its ink
+  being the pixels much darker than the colour around them; with the colours fitted, their width
+  too (the one whose ink overlaps the example's most).
 
 - **cartoon colour adjustments**, once ``bins`` and ``softness`` are known: the quantizer is
   inverted (:func:`unquantized_bounds`; a point on a ramp, a level's width on a plateau) and the
@@ -42,14 +45,17 @@ import torch
 import torch.nn.functional as F
 
 from wise.effects.base import Effect
-from wise.effects.common import COLOUR_ADJUSTMENTS, detail_sigmas, edge_response, xdog_lines
-from wise.filters import rgb_to_lab
+from wise.effects.common import COLOUR_ADJUSTMENTS, detail_sigmas, edge_flow, edge_response, xdog_lines
+from wise.filters import adjust_color, lab_to_rgb, oriented_bilateral, rgb_to_lab
 from wise.filters.quantize import MIN_BINS, quantize
 from wise.optimize.parametric import Settings, closest, image_distance, optimize
 from wise.params import NORMALIZED_MAX, NORMALIZED_MIN
 
 WORKING_SIDE = 512
 """Short side at which the estimates are made (a larger example is reduced to it)."""
+JUDGE_SIDE = 512
+"""Short side (at most) at which renders decide between several readings (:attr:`Reading.alternatives`),
+whatever size they were read at."""
 BIN_STEP = 0.01
 """Resolution of the bin count searched over the parameter's range."""
 HISTOGRAM_BINS = 2048
@@ -117,12 +123,14 @@ short side, iterations and learning rate of its descent."""
 @dataclass
 class Reading:
     """What an effect's estimate read off an example: its best ``params`` ``(1, P)``, whether the
-    example showed them clearly (``clear``: then taken as they are), and where it left them
-    open, the ``candidates`` worth a brief descent each (:func:`read_steps` with ``search``)."""
+    example showed them clearly (``clear``: then taken as they are), where it left them open,
+    the ``candidates`` worth a brief descent each (:func:`read_steps` with ``search``), and
+    ``alternatives``: other readings that renders at the example's size decide between."""
 
     params: torch.Tensor
     clear: bool
     candidates: list[torch.Tensor] = field(default_factory=list)
+    alternatives: list[torch.Tensor] = field(default_factory=list)
 
 
 # ----- cartoon: plateaus of the luminance ---------------------------------------------------
@@ -468,18 +476,154 @@ def xdog_threshold_from_ink(
     return min(ties, key=lambda entry: abs(entry[0] - (ties[0][0] if current is None else current)))
 
 
-def _xdog(effect: Effect, content: torch.Tensor, example: torch.Tensor, params: torch.Tensor) -> Reading:
-    with torch.no_grad():
-        p, ctx = effect.real_values(content, params)
-        luminance, tangent = effect.abstraction(content, p, ctx)
-        smoothing = detail_sigmas(p["details"])["edge_smoothing"]
-        response = [
-            edge_response(luminance, tangent, p["stroke_width"], c, smoothing, effect.kernel_size, ctx.scale)
-            for c in (0.0, 1.0)
-        ]
+TONE_PARAMS = ("brightness", "contrast", "saturation")
+"""The colour adjustments an XDoG's tone is read for (:func:`xdog_tone_from_shading`)."""
+TONE_PIXELS = 500
+"""Pixels of the example's shading the tone is fitted on: a random sample (seeded), enough for
+three parameters and fast enough to score thousands of tones."""
+TONE_CLEAR = 0.9
+"""A pixel at this share or more of the brightest within :data:`OUTLINE_REACH` pixels lies off
+the lines: its value is the shading alone."""
+TONE_WHITE = 0.99
+TONE_BLACK = 0.05
+"""Pixels this bright or brighter are left out: content clamped to white (and a shading of 0)
+puts them there whatever the tone; so are pixels this dark or darker: inside a wide area of ink,
+no brighter pixel nearby tells them from the shading."""
+TONE_TRIM = 0.6
+"""Share of the pixels the fit keeps, those the tone describes best: the rest lie in the soft
+border of the ink, which darkens them."""
+TONE_DETAILS = (0.0, 0.75, 1.5, 2.25, 3.0)
+TONE_DETAIL_STARTS = 1
+"""The ``details`` tried where the abstraction is read with the tone, and the starts of each one's search."""
+TONE_GRID = 8
+TONE_STARTS = 3
+TONE_ROUNDS = 4
+"""The search over the tone: a grid of this many values of each colour adjustment, the best
+:data:`TONE_STARTS` of it each refined by :data:`TONE_ROUNDS` rounds of a 5-point grid around it,
+each 2.5 times finer than the one before."""
+
+
+def _tone_residuals(
+    colours: torch.Tensor, drawing: torch.Tensor, tones: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """For each tone ``(T, 3)`` (brightness, contrast, saturation) of ``colours`` ``(1, 3, N, 1)``:
+    the shading ``s`` of the drawing's values ``(N,)`` over their luminance, by least squares on the
+    :data:`TONE_TRIM` share of pixels it describes best, and that share's mean absolute residual."""
+    adjusted = adjust_color(
+        colours.expand(len(tones), -1, -1, -1), brightness=tones[:, 0], contrast=tones[:, 1], saturation=tones[:, 2]
+    )
+    darkness = 1.0 - (rgb_to_lab(adjusted)[:, 0] / 100.0).flatten(1).clamp(0.0, 1.0)
+    weights = torch.ones_like(darkness)
+    keep = max(1, int(TONE_TRIM * darkness.shape[1]))
+    for _ in range(3):  # least squares, then again on the pixels it describes best
+        shading = ((1.0 - drawing) * darkness * weights).sum(1) / (darkness.square() * weights).sum(1).clamp_min(1e-6)
+        shading = shading.clamp(0.0, 1.0)
+        residuals = (drawing - (1.0 - shading[:, None] * darkness)).abs()
+        weights = (residuals <= residuals.kthvalue(keep, dim=1).values[:, None]).to(residuals)
+    return shading, (residuals * weights).sum(1) / weights.sum(1)
+
+
+def _shading_sample(example: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor] | None:
+    """Indices (flat) and values of up to :data:`TONE_PIXELS` pixels of an XDoG ``example`` that
+    show its shading alone (off the lines, neither white nor black); None where fewer than 64 do."""
+    drawing = example.mean(dim=1, keepdim=True)
+    around = F.max_pool2d(drawing, kernel_size=2 * OUTLINE_REACH + 1, stride=1, padding=OUTLINE_REACH)
+    shown = (drawing >= TONE_CLEAR * around) & (drawing > TONE_BLACK) & (drawing < TONE_WHITE)
+    clear = shown.flatten().nonzero().flatten()
+    if len(clear) < 64:
+        return None
+    generator = torch.Generator().manual_seed(0)
+    clear = clear[torch.randperm(len(clear), generator=generator)[:TONE_PIXELS].to(clear.device)]
+    return clear, drawing.flatten()[clear]
+
+
+def _abstracted_colours(effect: Effect, content: torch.Tensor, details: torch.Tensor, scale: float) -> torch.Tensor:
+    """``content`` ``(1, 3, H, W)`` smoothed by the XDoG's flow-aligned bilateral filter at
+    ``details``, before any colour adjustment, in RGB."""
+    sigmas = detail_sigmas(details)
+    lab = rgb_to_lab(content)
+    tangent = edge_flow(lab[:, :1], sigmas["structure"], scale)
+    smoothed = oriented_bilateral(
+        lab, tangent, sigmas["bilateral_spatial"], sigmas["bilateral_range"], effect.kernel_size, scale
+    )
+    return lab_to_rgb(smoothed)
+
+
+def _best_tone(effect: Effect, colours: torch.Tensor, values: torch.Tensor, starts: int) -> tuple[torch.Tensor, float]:
+    """The tone (brightness, contrast, saturation) whose shading of ``colours`` ``(1, 3, N, 1)``
+    follows the drawing's ``values`` ``(N,)`` best (:func:`_tone_residuals`), by the coarse-to-fine
+    search of :data:`TONE_GRID` from the best ``starts`` of its grid, and its residual."""
+    like = {"dtype": colours.dtype, "device": colours.device}
+    specs = [effect.spec(name) for name in TONE_PARAMS]
+    low = torch.tensor([spec.min for spec in specs], **like)
+    high = torch.tensor([spec.max for spec in specs], **like)
+    grid = torch.cartesian_prod(*(torch.linspace(spec.min, spec.max, TONE_GRID) for spec in specs)).to(**like)
+    errors = _tone_residuals(colours, values, grid)[1]
+    offsets = torch.cartesian_prod(*[torch.linspace(-2.0, 2.0, 5)] * 3).to(**like)
+    best, best_error = grid[0], math.inf
+    for centre in grid[errors.argsort()[:starts]]:
+        step = (high - low) / (TONE_GRID - 1)
+        for _ in range(TONE_ROUNDS):
+            step = step / 2.5
+            tones = torch.cat([centre[None], torch.minimum(torch.maximum(centre + offsets * step, low), high)])
+            errors = _tone_residuals(colours, values, tones)[1]
+            centre = tones[int(errors.argmin())]
+        if float(errors.min()) < best_error:
+            best, best_error = centre, float(errors.min())
+    return best, best_error
+
+
+def xdog_tone_from_shading(
+    effect: Effect, content: torch.Tensor, example: torch.Tensor, params: torch.Tensor, details: bool = False
+) -> dict[str, float] | None:
+    """The colour adjustments and ``shading`` of an XDoG ``example`` read off its shading: off the
+    lines the drawing is ``1 - s (1 - L)``, with ``L`` the luminance of the adjusted, abstracted
+    content. The content is abstracted once at the ``details`` of ``params`` (the bilateral filter
+    smooths much as it would after the adjustments), each tone of a coarse-to-fine search adjusts
+    it, and ``s`` follows by least squares: no descent, so no local minimum of the lines'
+    threshold. With ``details``, the abstraction's ``details`` too, among :data:`TONE_DETAILS`
+    (each with a shorter search), the one whose shading fits best. None where the example shows
+    too little shading off its lines."""
+    sample = _shading_sample(example)
+    if sample is None:
+        return None
+    pixels, values = sample
+    p, ctx = effect.real_values(content, params)
+    chosen = p["details"]
+    if details:
+        fits = []
+        for value in TONE_DETAILS:
+            candidate = torch.full_like(p["details"], value)
+            colours = _abstracted_colours(effect, content, candidate, ctx.scale).flatten(2)[:, :, pixels, None]
+            fits.append((_best_tone(effect, colours, values, TONE_DETAIL_STARTS)[1], value))
+        chosen = torch.full_like(p["details"], min(fits)[1])
+    colours = _abstracted_colours(effect, content, chosen, ctx.scale).flatten(2)[:, :, pixels, None]
+    tone = _best_tone(effect, colours, values, TONE_STARTS)[0]
+    shading = float(_tone_residuals(colours, values, tone[None])[0])
+    shading_spec = effect.spec("shading")
+    return {
+        **dict(zip(TONE_PARAMS, tone.tolist())),
+        "shading": min(max(shading, shading_spec.min), shading_spec.max),
+        **({"details": float(chosen.flatten()[0])} if details else {}),
+    }
+
+
+def _xdog_lines_read(
+    effect: Effect, content: torch.Tensor, example: torch.Tensor, params: torch.Tensor, shading: float | None
+) -> torch.Tensor:
+    """``params`` with ``contour`` and ``blackness`` read off the ink of ``example`` at the other
+    parameters, and ``shading`` (read off the example where None)."""
+    p, ctx = effect.real_values(content, params)
+    luminance, tangent = effect.abstraction(content, p, ctx)
+    smoothing = detail_sigmas(p["details"])["edge_smoothing"]
+    response = [
+        edge_response(luminance, tangent, p["stroke_width"], c, smoothing, effect.kernel_size, ctx.scale)
+        for c in (0.0, 1.0)
+    ]
     drawing = example.mean(dim=1, keepdim=True)
     shading_spec = effect.spec("shading")
-    shading = shading_from_example(drawing, luminance, shading_spec.min, shading_spec.max)
+    if shading is None:
+        shading = shading_from_example(drawing, luminance, shading_spec.min, shading_spec.max)
     shaded = (1.0 - shading * (1.0 - luminance.clamp(0.0, 1.0))).clamp_min(1e-3)
     ink = drawing / shaded < INK
     contour_spec, blackness_spec = effect.spec("contour"), effect.spec("blackness")
@@ -493,11 +637,27 @@ def _xdog(effect: Effect, content: torch.Tensor, example: torch.Tensor, params: 
         current=float(p["contour"].mean()),
     )
     if overlap < 0:  # no ink: the lines are not there to read
-        return Reading(_with(effect, params, shading=shading), False)
-    # taken only where it fits better: read at the other parameters' current values, the ink can
-    # be drawn by a threshold that descent must be free to leave (one trial of the benchmark: held,
-    # 0.935 SSIM; free, 0.994)
-    return Reading(_with(effect, params, shading=shading, contour=contour, blackness=blackness), False)
+        return _with(effect, params, shading=shading)
+    return _with(effect, params, shading=shading, contour=contour, blackness=blackness)
+
+
+def _xdog(effect: Effect, content: torch.Tensor, example: torch.Tensor, params: torch.Tensor) -> Reading:
+    with torch.no_grad():
+        lines = _xdog_lines_read(effect, content, example, params, None)
+        toned = []
+        for tone in (
+            xdog_tone_from_shading(effect, content, example, params),
+            xdog_tone_from_shading(effect, content, example, params, details=True),
+        ):
+            if tone is not None:
+                adjusted = _with(
+                    effect, params, **{name: tone[name] for name in (*TONE_PARAMS, "details") if name in tone}
+                )
+                toned.append(_xdog_lines_read(effect, content, example, adjusted, tone["shading"]))
+        # taken only where it fits better (read_steps): read at the other parameters' current
+        # values, the ink can be drawn by a threshold that descent must be free to leave (one trial
+        # of the benchmark: held, 0.935 SSIM; free, 0.994)
+        return Reading(lines, False, alternatives=toned)
 
 
 # ----- shared -------------------------------------------------------------------------------
@@ -509,9 +669,13 @@ INVERTED_PARAMS: dict[str, tuple[str, ...]] = {
 }
 """The parameters each effect's estimate sets; the others are left where they stand."""
 
-FITTED_PARAMS: dict[str, tuple[str, ...]] = {"cartoon": (*COLOUR_ADJUSTMENTS, "stroke_width")}
-"""The parameters :func:`read_starts` fits to the steps read, for its second start: the colours and
-the outlines' width."""
+FITTED_PARAMS: dict[str, tuple[str, ...]] = {
+    "cartoon": (*COLOUR_ADJUSTMENTS, "stroke_width"),
+    "xdog": (*TONE_PARAMS, "details"),
+}
+"""The parameters fitted besides those read: cartoon's in :func:`read_starts`, for its second
+start (the colours and the outlines' width); xdog's with its shading, the tone and the
+abstraction (:func:`xdog_tone_from_shading`)."""
 
 HELD_PARAMS: dict[str, tuple[str, ...]] = {"cartoon": ("bins",), "xdog": ()}
 """Of those, the ones with no useful gradient: read clearly, descent holds them. The others have
@@ -587,11 +751,18 @@ def read_steps(
         return params, ()
     device = params.device
     with torch.no_grad():
+        full_content, full_example = content.detach(), example.detach()
         content, example = _working_copy(content.detach(), side), _working_copy(example.detach(), side).to(content)
         given = params.detach().reshape(1, -1).to(content)
         reading = estimate(effect, content, example, given)
         found = reading.params
-        if not reading.clear:  # an estimate that the example leaves open must fit better than what was there
+        if not reading.clear and reading.alternatives:
+            # several readings: judged at up to JUDGE_SIDE, because a small copy's render is another
+            # look (lines and steps at another scale) that can favour the wrong one
+            judged_content = _working_copy(full_content, max(side, JUDGE_SIDE))
+            judged_example = _working_copy(full_example, max(side, JUDGE_SIDE)).to(judged_content)
+            found = closest(effect, judged_content, judged_example, [given, found, *reading.alternatives])
+        elif not reading.clear:  # an estimate that the example leaves open must fit better than what was there
             found = closest(effect, content, example, [given, found])
     if not reading.clear and search and len(reading.candidates) > 1:
         found = best_after_brief_descent(effect, content, example, [given, *reading.candidates])

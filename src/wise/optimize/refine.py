@@ -70,8 +70,10 @@ budget): the random crops' noise settles instead of moving the answer at the las
 (BENCHMARKS.md, "The learning rate of the crops")."""
 INVERSION_SIDE = 128
 """Short side at which the staircase parameters are read off the example before the levels
-(:func:`wise.optimize.inversion.read_steps`): the luminance plateaus show at any size, and at
-128 pixels the reading costs about half a second of the budget (two seconds at 256)."""
+(:func:`wise.optimize.inversion.read_steps`): the luminance plateaus and the shading show at any
+size. The readings are then judged by renders at up to 512 pixels, where the look is the
+example's (at 128 pixels lines and steps are another picture); with that, the reading costs
+about 1.4 s of the budget for xdog (BENCHMARKS.md, "The XDoG's tone read off its shading")."""
 INVERSION_MIN_BUDGET = 2.0
 """Budgets below this many seconds go to descent alone: the reading would take a quarter or more."""
 RENDER_SHARE = 1.5
