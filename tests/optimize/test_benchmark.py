@@ -91,3 +91,18 @@ def test_of_several_starts_the_trial_keeps_the_one_that_ends_closest(off_the_sta
         _, _, outcome = benchmark._trial(case.cartoon, case.content, torch.Generator(), levels, crops, 0)
         assert outcome.params[0, bins] == pytest.approx(float(case.truth[0, bins]), abs=1e-3)
         assert torch.equal(outcome.result, case.cartoon(case.content, outcome.params).detach())
+
+
+def test_a_start_that_descent_strays_from_is_the_answer(off_the_staircase, monkeypatch) -> None:
+    from wise.optimize import benchmark
+    from wise.optimize.parametric import Outcome
+
+    case = off_the_staircase
+    monkeypatch.setattr(benchmark, "random_reference", lambda effect, content, generator: (case.truth, case.target))
+    monkeypatch.setattr(benchmark, "read_starts", lambda *args: ([case.truth], ()))
+    strayed = Outcome(params=case.wrong.clone(), result=case.cartoon(case.content, case.wrong).detach())
+    monkeypatch.setattr(benchmark, "_descend", lambda *args: strayed)
+    levels, crops = benchmark.schedule(4, 1e-4, "l2")
+    _, _, outcome = benchmark._trial(case.cartoon, case.content, torch.Generator(), levels, crops, 0)
+    assert torch.equal(outcome.params, case.truth)
+    assert torch.equal(outcome.result, case.target)

@@ -144,6 +144,24 @@ def test_of_two_starts_the_first_level_decides_and_says_so(off_the_staircase) ->
     assert said.getvalue() == ""
 
 
+def test_a_start_that_descent_strayed_from_is_kept_and_said(off_the_staircase) -> None:
+    import io
+
+    from wise.optimize.parametric import Outcome
+    from wise.optimize.run import _kept_start
+
+    case = off_the_staircase
+    strayed = Outcome(params=case.wrong.clone(), result=case.cartoon(case.content, case.wrong).detach())
+    said = io.StringIO()
+    kept = _kept_start(case.cartoon, case.content, case.target, case.truth, strayed, "l1", said)
+    assert torch.equal(kept.params, case.truth) and torch.equal(kept.result, case.target)
+    assert "keeping the start" in said.getvalue()
+    better = Outcome(params=case.truth.clone(), result=case.target)
+    said = io.StringIO()
+    assert _kept_start(case.cartoon, case.content, case.target, case.wrong, better, "l1", said) is better
+    assert said.getvalue() == ""
+
+
 def test_the_time_left_counts_from_the_start_of_descent_not_the_reading() -> None:
     from wise.optimize.parametric import Settings, pyramid
     from wise.optimize.run import Progress

@@ -108,8 +108,14 @@ def _trial(
         if outcomes[-1].interrupted:
             return truth, reference, outcomes[-1]
     loss = levels[-1][1].loss
-    best = closest(effect, content, reference, [outcome.params for outcome in outcomes], loss)
-    outcome = next(outcome for outcome in outcomes if outcome.params is best)
+    # descent can end further from the reference than a reading it started from (the coarse
+    # levels' reduced looks pull it away): the starts are answers too, as in wise predict
+    best = closest(effect, content, reference, [*(outcome.params for outcome in outcomes), *starts], loss)
+    if any(best is start for start in starts):
+        with torch.no_grad():
+            outcome = replace(outcomes[0], params=best, result=effect(content, best))
+    else:
+        outcome = next(outcome for outcome in outcomes if outcome.params is best)
     outcome.seconds = time.perf_counter() - began  # the reading and every start included
     return truth, reference, outcome
 

@@ -26,7 +26,7 @@ from wise.optimize.inversion import (
     read_starts,
     undoable_starts,
 )
-from wise.optimize.parametric import Outcome, Settings, describe_levels, optimize_coarse_to_fine, pyramid
+from wise.optimize.parametric import Outcome, Settings, closest, describe_levels, optimize_coarse_to_fine, pyramid
 from wise.optimize.report import write_animation, write_report
 from wise.paramfile import load_params, save_params
 from wise.render import render
@@ -174,6 +174,8 @@ def run(
         start_params = _first_level_decides(effect, content, target, starts, levels[0], out)
         progress.start()
         outcome = optimize_coarse_to_fine(effect, content, target, start_params, levels, on_step, between)
+        if settings.mode == "global" and not outcome.interrupted:
+            outcome = _kept_start(effect, content, target, start_params, outcome, settings.loss, out)
         interruption.hold()
         if outcome.interrupted:
             print(
@@ -223,6 +225,28 @@ def _read_steps(
                 flush=True,
             )
     return starts, between, held
+
+
+def _kept_start(
+    effect: Effect,
+    content: torch.Tensor,
+    target: torch.Tensor,
+    start: torch.Tensor,
+    outcome: Outcome,
+    loss: str,
+    out: TextIO,
+) -> Outcome:
+    """``outcome``, or the start it descended from (global parameters) where that re-creates the
+    target better by ``loss``: descent can stray from a reading that was right (the coarse
+    levels' reduced looks pull it away)."""
+    if loss == "nst" or start.dim() > 2:
+        return outcome
+    start = start.reshape(outcome.params.shape).to(outcome.params)
+    if closest(effect, content, target, [outcome.params, start], loss) is outcome.params:
+        return outcome
+    print("the start re-creates the target better than where descent ended: keeping the start", file=out, flush=True)
+    with torch.no_grad():
+        return replace(outcome, params=start, result=effect(content, start))
 
 
 def _distinct(starts: list[torch.Tensor]) -> list[torch.Tensor]:
