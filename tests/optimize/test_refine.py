@@ -86,6 +86,28 @@ def test_refinement_starts_from_the_number_of_levels_of_a_cartoon_example(photo:
     assert found["bins"] == pytest.approx(4.0, abs=0.3) and found["softness"] < 0.3
 
 
+def test_refinement_holds_a_count_read_where_the_example_leaves_it_open(
+    photo: torch.Tensor, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Within seconds, descent from a network's start drifts a count read rightly towards a few
+    soft levels: the count the reading changed is held, clear or not."""
+    import wise.optimize.refine as refinement
+
+    effect = wise.effects.create("cartoon")
+    truth = effect.params_from_dict({"bins": 6.0, "softness": 0.3})[None]
+    with torch.no_grad():
+        example = effect(photo, truth)
+    start = effect.params_from_dict({"bins": 3.0, "softness": 0.8, "contrast": 1.5})[None]
+    read = effect.params_from_dict({"bins": 6.0, "softness": 0.8, "contrast": 1.5})[None]
+    monkeypatch.setattr(refinement, "read_steps", lambda *args, **kwargs: (read.clone(), ()))  # left open
+    outcome = refine(effect, photo, example, start, budget=30.0, max_iterations=30)
+    bins = effect.param_names.index("bins")
+    assert outcome.read is not None and torch.equal(outcome.read, read)
+    assert outcome.params[0, bins] == read[0, bins]
+    moved = outcome.params[0] != read[0]
+    assert moved.any(), "the other parameters descend"
+
+
 def test_global_refinement_descends_on_crops_of_a_large_copy_and_whole_small_ones() -> None:
     large, small = torch.zeros(1, 3, 768, 1024), torch.zeros(1, 3, 200, 300)
     (level,) = _levels(large, "global")

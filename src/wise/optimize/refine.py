@@ -20,7 +20,7 @@ import torch.nn.functional as F
 
 from wise.effects.base import Effect
 from wise.errors import WiseError
-from wise.optimize.inversion import read_steps
+from wise.optimize.inversion import HELD_PARAMS, read_steps
 from wise.optimize.parametric import CROP_CONTEXT, Outcome, Settings, optimize_coarse_to_fine, optimize_on_crops
 
 
@@ -145,6 +145,12 @@ def refine(
     if start.dim() <= 2 and budget >= INVERSION_MIN_BUDGET:
         params, held = read_steps(effect, content, target, start.reshape(1, -1), side=INVERSION_SIDE)
         read = None if torch.equal(params, start.reshape(params.shape)) else params
+        if read is not None:
+            # held even where the example left the count open: in a budget of seconds, descent
+            # from a network's start trades a count read rightly for a smooth look of two or
+            # three soft levels, and has no time to find the example's from there (BENCHMARKS.md,
+            # "The count held in the refinement")
+            held = HELD_PARAMS.get(getattr(effect, "name", ""), held)
     losses: list[float] = []
     outcome: Outcome | None = None
     seconds_per_pixel = 0.0  # of an iteration and a render at the level before
