@@ -9,9 +9,11 @@ from wise.effects.common import COLOUR_ADJUSTMENTS
 from wise.filters.quantize import quantize
 from wise.optimize import inversion
 from wise.optimize.inversion import (
+    colours_from_levels,
     comb_agreement,
     describe_estimates,
     fit_colours_to_levels,
+    fit_quickly,
     inversion_between_levels,
     invert_steps,
     level_agreement,
@@ -117,6 +119,40 @@ def test_the_colour_adjustments_are_fitted_to_the_examples_levels(
         assert _real(cartoon, fitted, name) == pytest.approx(_real(cartoon, truth, name), abs=tolerance), name
     untouched = [i for i, name in enumerate(cartoon.param_names) if name in ("bins", "softness", "details", "contour")]
     assert torch.equal(fitted[0, untouched], start[0, untouched])
+
+
+def test_the_colour_adjustments_are_fitted_quickly_on_a_sample_of_the_levels(astronaut: torch.Tensor) -> None:
+    cartoon, content, truth, example = _example(
+        astronaut, "cartoon", 128, bins=6.0, softness=0.05, brightness=0.15, contrast=1.6, saturation=0.5, tint=0.3
+    )
+    start = _with(cartoon, truth, brightness=-0.1, contrast=1.0, saturation=1.5, tint=0.0)
+    fitted = colours_from_levels(cartoon, content, example, start)
+    with torch.no_grad():
+        before, after = (float((cartoon(content, p) - example).square().mean()) for p in (start, fitted))
+    assert after < 0.25 * before, (before, after)
+    for name, tolerance in (("brightness", 0.08), ("contrast", 0.25), ("saturation", 0.2), ("tint", 0.08)):
+        assert _real(cartoon, fitted, name) == pytest.approx(_real(cartoon, truth, name), abs=tolerance), name
+    colours = [i for i, name in enumerate(cartoon.param_names) if name in COLOUR_ADJUSTMENTS]
+    others = [i for i in range(len(cartoon.param_names)) if i not in colours]
+    assert torch.equal(fitted[0, others], start[0, others])
+
+
+def test_a_quick_fit_is_kept_only_where_it_renders_closer(
+    astronaut: torch.Tensor, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    cartoon, content, truth, example = _example(astronaut, "cartoon", 96, bins=6.0, softness=0.05, saturation=0.5)
+    start = _with(cartoon, truth, saturation=2.0)
+    with torch.no_grad():
+        fitted = fit_quickly(cartoon, content, example, start, side=96)
+        assert float((cartoon(content, fitted) - example).square().mean()) < float(
+            (cartoon(content, start) - example).square().mean()
+        )
+    worse = _with(cartoon, truth, saturation=3.0)
+    monkeypatch.setitem(inversion._QUICK_FITS, "cartoon", lambda *args: worse.clone())
+    assert torch.equal(fit_quickly(cartoon, content, example, truth, side=96), truth)
+    xdog = effects.create("xdog")
+    given = xdog.default_params().reshape(1, -1)
+    assert fit_quickly(xdog, content, content, given) is given  # no fit for xdog
 
 
 def test_the_ink_threshold_comes_from_the_ink_share_and_the_response() -> None:

@@ -102,9 +102,9 @@ def test_refinement_holds_a_count_read_where_the_example_leaves_it_open(
     monkeypatch.setattr(refinement, "read_steps", lambda *args, **kwargs: (read.clone(), ()))  # left open
     outcome = refine(effect, photo, example, start, budget=30.0, max_iterations=30)
     bins = effect.param_names.index("bins")
-    assert outcome.read is not None and torch.equal(outcome.read, read)
+    assert outcome.read is not None and outcome.read[0, bins] == read[0, bins]
     assert outcome.params[0, bins] == read[0, bins]
-    moved = outcome.params[0] != read[0]
+    moved = outcome.params[0] != outcome.read[0]
     assert moved.any(), "the other parameters descend"
 
 

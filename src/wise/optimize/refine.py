@@ -20,7 +20,7 @@ import torch.nn.functional as F
 
 from wise.effects.base import Effect
 from wise.errors import WiseError
-from wise.optimize.inversion import HELD_PARAMS, read_steps
+from wise.optimize.inversion import HELD_PARAMS, fit_quickly, read_steps
 from wise.optimize.parametric import CROP_CONTEXT, Outcome, Settings, optimize_coarse_to_fine, optimize_on_crops
 
 
@@ -144,6 +144,9 @@ def refine(
     params, held, read = start, (), None
     if start.dim() <= 2 and budget >= INVERSION_MIN_BUDGET:
         params, held = read_steps(effect, content, target, start.reshape(1, -1), side=INVERSION_SIDE)
+        # the cartoon's colours fitted to the levels read, on a sample of pixels (half a second):
+        # descent from a tone curve that fits but is not the example's trades one for another
+        params = fit_quickly(effect, content, target, params, side=INVERSION_SIDE)
         read = None if torch.equal(params, start.reshape(params.shape)) else params
         if read is not None:
             # held even where the example left the count open: in a budget of seconds, descent
