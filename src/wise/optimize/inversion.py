@@ -420,19 +420,21 @@ def _cartoon(effect: Effect, content: torch.Tensor, example: torch.Tensor, param
 
 
 def _cartoon_outlines(
-    effect: Effect, content: torch.Tensor, example: torch.Tensor, params: torch.Tensor
+    effect: Effect, content: torch.Tensor, example: torch.Tensor, params: torch.Tensor, all_widths: bool = True
 ) -> dict[str, float]:
     """The cartoon's ``stroke_width``, ``contour`` and ``blackness`` read from the outlines of
     ``example``, with the other parameters at ``params``: for each of :data:`STROKE_WIDTHS` widths
-    the threshold that draws the example's ink best (:func:`_outline_reading`), the width whose
-    ink overlaps the example's most kept (empty where no outline shows)."""
+    (or only the width of ``params``) the threshold that draws the example's ink best
+    (:func:`_outline_reading`), the width whose ink overlaps the example's most kept (empty where
+    no outline shows)."""
     p, ctx = effect.real_values(content, params)
     abstracted, tangent = effect.abstraction(content, p, ctx)
     luminance = abstracted[:, :1] / 100.0
     spec = effect.spec("stroke_width")
+    widths = torch.linspace(spec.min, spec.max, STROKE_WIDTHS) if all_widths else p["stroke_width"].flatten()[:1]
     best: dict[str, float] = {}
     best_overlap = -1.0
-    for width in torch.linspace(spec.min, spec.max, STROKE_WIDTHS).tolist():
+    for width in widths.tolist():
         with_width = {**p, "stroke_width": torch.full_like(p["stroke_width"], width)}
         read, overlap = _outline_reading(effect, example, luminance, tangent, with_width, ctx.scale)
         if read and overlap > best_overlap:
@@ -880,16 +882,13 @@ def _cartoon_colours_quickly(
     effect: Effect, content: torch.Tensor, example: torch.Tensor, params: torch.Tensor
 ) -> torch.Tensor:
     """``params`` with the colour adjustments fitted by :func:`colours_from_levels`, and the
-    outlines' threshold read again at them (the ink is read off the adjusted luminance), where
-    that renders closer at this size."""
+    outlines' threshold read again at them at the width as it stands (the ink is read off the
+    adjusted luminance; :func:`_cartoon_colours` reads every width, seconds), where that renders
+    closer at this size."""
     fitted = colours_from_levels(effect, content, example, params)
     with torch.no_grad():
-        p, ctx = effect.real_values(content, fitted)
-        abstracted, tangent = effect.abstraction(content, p, ctx)
-        outlines = _outline_reading(effect, example, abstracted[:, :1] / 100.0, tangent, p, ctx.scale)[0]
-        if not outlines:
-            return fitted
-        return closest(effect, content, example, [fitted, _with(effect, fitted, **outlines)])
+        outlines = _cartoon_outlines(effect, content, example, fitted, all_widths=False)
+    return closest(effect, content, example, [fitted, _with(effect, fitted, **outlines)]) if outlines else fitted
 
 
 _QUICK_FITS: dict[str, Callable[[Effect, torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor]] = {
@@ -914,10 +913,9 @@ def fit_quickly(
     fitted = fit(effect, small_content, small_example, given)
     if torch.equal(fitted, given):
         return params
-    with torch.no_grad():
-        judged_content = _working_copy(content.detach(), max(side, JUDGE_SIDE))
-        judged_example = _working_copy(example.detach(), max(side, JUDGE_SIDE)).to(judged_content)
-        best = closest(effect, judged_content, judged_example, [given.to(judged_content), fitted.to(judged_content)])
+    judged_content = _working_copy(content.detach(), max(side, JUDGE_SIDE))
+    judged_example = _working_copy(example.detach(), max(side, JUDGE_SIDE)).to(judged_content)
+    best = closest(effect, judged_content, judged_example, [given.to(judged_content), fitted.to(judged_content)])
     return best.to(device=params.device, dtype=params.dtype).reshape(params.shape)
 
 

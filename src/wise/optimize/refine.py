@@ -143,17 +143,18 @@ def refine(
     # the staircase parameters read off the example, within the budget
     params, held, read = start, (), None
     if start.dim() <= 2 and budget >= INVERSION_MIN_BUDGET:
-        params, held = read_steps(effect, content, target, start.reshape(1, -1), side=INVERSION_SIDE)
-        # the cartoon's colours fitted to the levels read, on a sample of pixels (half a second):
-        # descent from a tone curve that fits but is not the example's trades one for another
-        params = fit_quickly(effect, content, target, params, side=INVERSION_SIDE)
-        read = None if torch.equal(params, start.reshape(params.shape)) else params
-        if read is not None:
+        given = start.reshape(1, -1)
+        params, held = read_steps(effect, content, target, given, side=INVERSION_SIDE)
+        if not torch.equal(params, given.to(params)):
             # held even where the example left the count open: in a budget of seconds, descent
             # from a network's start trades a count read rightly for a smooth look of two or
             # three soft levels, and has no time to find the example's from there (BENCHMARKS.md,
             # "The count held in the refinement")
             held = HELD_PARAMS.get(getattr(effect, "name", ""), held)
+        # the cartoon's colours fitted to the levels read, on a sample of pixels (half a second):
+        # descent from a tone curve that fits but is not the example's trades one for another
+        params = fit_quickly(effect, content, target, params, side=INVERSION_SIDE)
+        read = None if torch.equal(params, start.reshape(params.shape)) else params
     losses: list[float] = []
     outcome: Outcome | None = None
     seconds_per_pixel = 0.0  # of an iteration and a render at the level before
