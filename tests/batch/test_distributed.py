@@ -241,3 +241,24 @@ def test_the_command_line_without_ray_refuses_in_one_line(
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and 'pip install "wise[ray]"' in err, err
     assert not (tmp_path / "out").exists()
+
+
+def test_a_write_that_ends_after_the_actors_were_stopped_leaves_no_temporary(tmp_path: Path) -> None:
+    """An actor killed as the pipeline closes can still be ending its write: its temporary file,
+    appearing a moment later, is removed too; a finished output is kept."""
+    import threading
+
+    job = Job(tmp_path / "photo.png", tmp_path / "out" / "photo.png", None)
+    job.output.parent.mkdir()
+    (job.output.parent / "other.png").write_bytes(b"finished")
+    late = job.output.parent / ".photo.png.abc123.tmp"
+    writer = threading.Timer(0.3, late.write_bytes, args=(b"half",))
+    writer.start()
+    began = time.monotonic()
+    distributed._remove_temporaries([job])
+    writer.join()
+    assert not late.exists() and (job.output.parent / "other.png").read_bytes() == b"finished"
+    assert time.monotonic() - began < distributed.LEFTOVER_SECONDS + 0.5
+    began = time.monotonic()
+    distributed._remove_temporaries([])  # nothing cut off: no wait
+    assert time.monotonic() - began < 0.5 * distributed.LEFTOVER_SECONDS

@@ -71,6 +71,12 @@ MAX_BLOCKS = 4096
 """Most rows the jobs are split into: one job per block up to this, so outcomes stream back one
 by one; beyond, a few jobs per block."""
 
+LEFTOVER_SECONDS = 1.0
+LEFTOVER_POLL = 0.1
+"""After a run cut short, the temporary files of the writes cut off are removed for this long,
+every :data:`LEFTOVER_POLL` seconds: the actors are killed as the pipeline closes (or Ray shuts
+down), and one can still be ending its write when that returns."""
+
 
 def require_ray() -> Any:
     """The ``ray`` module with Ray Data, or :class:`WiseError` saying how to install it."""
@@ -300,16 +306,23 @@ def _close(rows: Iterator[Any]) -> None:
 
 def _remove_temporaries(jobs: Sequence[Job]) -> None:
     """The hidden temporary files (of :func:`wise.io.atomic_path`) that writes cut off by the end
-    of the actors left next to ``jobs``' outputs."""
-    for job in jobs:
-        for path in (job.output, job.params):
-            if path is None or not path.parent.is_dir():
-                continue
-            for leftover in path.parent.glob(f".{path.name}.*.tmp"):
-                try:
-                    leftover.unlink()
-                except OSError:
-                    pass
+    of the actors left next to ``jobs``' outputs, removed for :data:`LEFTOVER_SECONDS`."""
+    if not jobs:
+        return
+    deadline = time.monotonic() + LEFTOVER_SECONDS
+    while True:
+        for job in jobs:
+            for path in (job.output, job.params):
+                if path is None or not path.parent.is_dir():
+                    continue
+                for leftover in path.parent.glob(f".{path.name}.*.tmp"):
+                    try:
+                        leftover.unlink()
+                    except OSError:
+                        pass
+        if time.monotonic() >= deadline:
+            return
+        time.sleep(LEFTOVER_POLL)
 
 
 def run_on_ray(
@@ -423,5 +436,6 @@ def _run_pipeline(
             bar.close()
             if owns:
                 ray.shutdown()
-                _remove_temporaries([job for job, done in zip(todo, reported) if not done])
+            # on a cluster it joined too: closing the pipeline kills the actors mid-write
+            _remove_temporaries([job for job, done in zip(todo, reported) if not done])
     return interrupted
