@@ -24,7 +24,7 @@ from wise.optimize.inversion import (
     staircase_fit,
     unquantized_bounds,
     xdog_threshold_from_ink,
-    xdog_tone_from_shading,
+    xdog_tones_from_shading,
 )
 from wise.optimize.parametric import Settings, optimize_coarse_to_fine
 from wise.train.procedural import dead_leaves
@@ -196,15 +196,14 @@ def test_xdog_tone_is_read_off_the_shading_between_its_lines(
     truth_tone = {"brightness": 0.05, "contrast": 2.6, "saturation": 2.5, "shading": 0.6}
     xdog, content, truth, example = _example(astronaut, "xdog", 128, **truth_tone)
     start = xdog.default_params().reshape(1, -1)  # contrast 1.15, saturation 1.02, shading 0.5
-    tone = xdog_tone_from_shading(xdog, content, example, start)
-    assert tone is not None
+    tone = xdog_tones_from_shading(xdog, content, example, start)[0]
     assert tone["shading"] == pytest.approx(0.6, abs=0.08)
     assert tone["contrast"] == pytest.approx(2.6, abs=0.4)
     assert tone["brightness"] == pytest.approx(0.05, abs=0.1)
     assert tone["saturation"] > 1.7  # strong saturation clips, so its exact value shows little
     found = invert_steps(xdog, content, example, start)
     assert _real(xdog, found, "contrast") == pytest.approx(tone["contrast"])
-    monkeypatch.setattr(inversion, "xdog_tone_from_shading", lambda *args, **kwargs: None)
+    monkeypatch.setattr(inversion, "xdog_tones_from_shading", lambda *args, **kwargs: [])
     lines_only = invert_steps(xdog, content, example, start)
     with torch.no_grad():
         error, error_lines_only = (float((xdog(content, p) - example).abs().mean()) for p in (found, lines_only))
@@ -214,9 +213,9 @@ def test_xdog_tone_is_read_off_the_shading_between_its_lines(
 def test_xdog_abstraction_is_read_with_the_tone(astronaut: torch.Tensor) -> None:
     xdog, content, _, example = _example(astronaut, "xdog", 128, details=3.0, contrast=2.0, shading=0.7)
     start = _with(xdog, xdog.default_params().reshape(1, -1), details=0.5)
-    tone = xdog_tone_from_shading(xdog, content, example, start, details=True)
-    assert tone is not None and tone["details"] >= 2.25
-    assert "details" not in (xdog_tone_from_shading(xdog, content, example, start) or {})
+    at_given, tone = xdog_tones_from_shading(xdog, content, example, start)
+    assert tone["details"] >= 2.25
+    assert "details" not in at_given
 
 
 def test_several_readings_are_judged_at_the_examples_size(
@@ -237,7 +236,7 @@ def test_several_readings_are_judged_at_the_examples_size(
 
 def test_lines_on_white_leave_no_tone_to_read(astronaut: torch.Tensor) -> None:
     xdog, content, _, example = _example(astronaut, "xdog", 96, shading=0.0, contour=2.0)
-    assert xdog_tone_from_shading(xdog, content, example, xdog.default_params().reshape(1, -1)) is None
+    assert xdog_tones_from_shading(xdog, content, example, xdog.default_params().reshape(1, -1)) == []
 
 
 def test_an_estimate_that_fits_worse_is_not_taken(astronaut: torch.Tensor) -> None:

@@ -17,7 +17,7 @@ nowhere useful until the steps line up, and descent settles in a local minimum (
   grid, ``blackness`` is the quantile of ``u`` at the example's ink share, and the contour whose
   ink covers the example's best is kept (:func:`xdog_threshold_from_ink`). Between the lines the
   shading also shows the tone: the colour adjustments whose luminance the example's values follow
-  best, ``s`` by least squares for each (:func:`xdog_tone_from_shading`), give a second reading,
+  best, ``s`` by least squares for each (:func:`xdog_tones_from_shading`), give a second reading,
   and renders at the example's size decide. A cartoon's outlines are read the same way, its ink
   being the pixels much darker than the colour around them; with the colours fitted, their width
   too (the one whose ink overlaps the example's most).
@@ -555,7 +555,7 @@ def xdog_threshold_from_ink(
 
 
 TONE_PARAMS = ("brightness", "contrast", "saturation")
-"""The colour adjustments an XDoG's tone is read for (:func:`xdog_tone_from_shading`)."""
+"""The colour adjustments an XDoG's tone is read for (:func:`xdog_tones_from_shading`)."""
 TONE_PIXELS = 500
 """Pixels of the example's shading the tone is fitted on: a random sample (seeded), enough for
 three parameters and fast enough to score thousands of tones."""
@@ -655,39 +655,42 @@ def _best_tone(effect: Effect, colours: torch.Tensor, values: torch.Tensor, star
     return best, best_error
 
 
-def xdog_tone_from_shading(
-    effect: Effect, content: torch.Tensor, example: torch.Tensor, params: torch.Tensor, details: bool = False
-) -> dict[str, float] | None:
+def xdog_tones_from_shading(
+    effect: Effect, content: torch.Tensor, example: torch.Tensor, params: torch.Tensor
+) -> list[dict[str, float]]:
     """The colour adjustments and ``shading`` of an XDoG ``example`` read off its shading: off the
     lines the drawing is ``1 - s (1 - L)``, with ``L`` the luminance of the adjusted, abstracted
-    content. The content is abstracted once at the ``details`` of ``params`` (the bilateral filter
-    smooths much as it would after the adjustments), each tone of a coarse-to-fine search adjusts
-    it, and ``s`` follows by least squares: no descent, so no local minimum of the lines'
-    threshold. With ``details``, the abstraction's ``details`` too, among :data:`TONE_DETAILS`
-    (each with a shorter search), the one whose shading fits best. None where the example shows
-    too little shading off its lines."""
+    content. The content is abstracted once per ``details`` (the bilateral filter smooths much as
+    it would after the adjustments), each tone of a coarse-to-fine search adjusts it, and ``s``
+    follows by least squares: no descent, so no local minimum of the lines' threshold. Two
+    readings: at the ``details`` of ``params``, and with the abstraction's ``details`` read too,
+    among :data:`TONE_DETAILS` (each with a shorter search), the one whose shading fits best (its
+    dict has ``details``). Empty where the example shows too little shading off its lines."""
     sample = _shading_sample(example)
     if sample is None:
-        return None
+        return []
     pixels, values = sample
     p, ctx = effect.real_values(content, params)
-    chosen = p["details"]
-    if details:
-        fits = []
-        for value in TONE_DETAILS:
-            candidate = torch.full_like(p["details"], value)
-            colours = _abstracted_colours(effect, content, candidate, ctx.scale).flatten(2)[:, :, pixels, None]
-            fits.append((_best_tone(effect, colours, values, TONE_DETAIL_STARTS)[1], value))
-        chosen = torch.full_like(p["details"], min(fits)[1])
-    colours = _abstracted_colours(effect, content, chosen, ctx.scale).flatten(2)[:, :, pixels, None]
-    tone = _best_tone(effect, colours, values, TONE_STARTS)[0]
-    shading = float(_tone_residuals(colours, values, tone[None])[0])
-    shading_spec = effect.spec("shading")
-    return {
-        **dict(zip(TONE_PARAMS, tone.tolist())),
-        "shading": min(max(shading, shading_spec.min), shading_spec.max),
-        **({"details": float(chosen.flatten()[0])} if details else {}),
-    }
+    abstracted: dict[float, torch.Tensor] = {}
+
+    def colours(details: float) -> torch.Tensor:  # each abstraction computed once
+        if details not in abstracted:
+            smoothed = _abstracted_colours(effect, content, torch.full_like(p["details"], details), ctx.scale)
+            abstracted[details] = smoothed.flatten(2)[:, :, pixels, None]
+        return abstracted[details]
+
+    def reading(details: float) -> dict[str, float]:
+        tone = _best_tone(effect, colours(details), values, TONE_STARTS)[0]
+        shading = float(_tone_residuals(colours(details), values, tone[None])[0])
+        shading_spec = effect.spec("shading")
+        return {
+            **dict(zip(TONE_PARAMS, tone.tolist())),
+            "shading": min(max(shading, shading_spec.min), shading_spec.max),
+        }
+
+    fits = [(_best_tone(effect, colours(value), values, TONE_DETAIL_STARTS)[1], value) for value in TONE_DETAILS]
+    chosen = min(fits)[1]
+    return [reading(float(p["details"].flatten()[0])), {**reading(chosen), "details": chosen}]
 
 
 def _xdog_lines_read(
@@ -727,15 +730,9 @@ def _xdog(effect: Effect, content: torch.Tensor, example: torch.Tensor, params: 
     with torch.no_grad():
         lines = _xdog_lines_read(effect, content, example, params, None)
         toned = []
-        for tone in (
-            xdog_tone_from_shading(effect, content, example, params),
-            xdog_tone_from_shading(effect, content, example, params, details=True),
-        ):
-            if tone is not None:
-                adjusted = _with(
-                    effect, params, **{name: tone[name] for name in (*TONE_PARAMS, "details") if name in tone}
-                )
-                toned.append(_xdog_lines_read(effect, content, example, adjusted, tone["shading"]))
+        for tone in xdog_tones_from_shading(effect, content, example, params):
+            adjusted = _with(effect, params, **{name: tone[name] for name in (*TONE_PARAMS, "details") if name in tone})
+            toned.append(_xdog_lines_read(effect, content, example, adjusted, tone["shading"]))
         # taken only where it fits better (read_steps): read at the other parameters' current
         # values, the ink can be drawn by a threshold that descent must be free to leave (one trial
         # of the benchmark: held, 0.935 SSIM; free, 0.994)
@@ -757,7 +754,7 @@ FITTED_PARAMS: dict[str, tuple[str, ...]] = {
 }
 """The parameters fitted besides those read: cartoon's in :func:`read_starts`, for its second
 start (the colours and the outlines' width); xdog's with its shading, the tone and the
-abstraction (:func:`xdog_tone_from_shading`)."""
+abstraction (:func:`xdog_tones_from_shading`)."""
 
 HELD_PARAMS: dict[str, tuple[str, ...]] = {"cartoon": ("bins",), "xdog": ()}
 """Of those, the ones with no useful gradient: read clearly, descent holds them. The others have
