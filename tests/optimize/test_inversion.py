@@ -18,10 +18,12 @@ from wise.optimize.inversion import (
     invert_steps,
     level_agreement,
     plateau_bins,
+    read_after_descent,
     read_starts,
     read_steps,
     softness_from_agreement,
     staircase_fit,
+    steps_from_rendering,
     unquantized_bounds,
     xdog_threshold_from_ink,
     xdog_tones_from_shading,
@@ -153,6 +155,24 @@ def test_a_quick_fit_is_kept_only_where_it_renders_closer(
     xdog = effects.create("xdog")
     given = xdog.default_params().reshape(1, -1)
     assert fit_quickly(xdog, content, content, given) is given  # no fit for xdog
+
+
+def test_the_count_and_ramps_are_swept_through_the_rendering(astronaut: torch.Tensor) -> None:
+    """With the colours right, the rendering of every count tells the example's, clipped colours
+    and outlines included, where the histogram's plateaus may not."""
+    cartoon, content, truth, example = _example(
+        astronaut, "cartoon", 128, bins=5.0, softness=0.2, saturation=2.5, contrast=1.8
+    )
+    wrong = _with(cartoon, truth, bins=11.0, softness=0.8)
+    swept = steps_from_rendering(cartoon, content, example, wrong)
+    assert _real(cartoon, swept, "bins") == pytest.approx(5.0, abs=0.1)
+    assert _real(cartoon, swept, "softness") == pytest.approx(0.2, abs=0.1)
+    others = [i for i, name in enumerate(cartoon.param_names) if name not in ("bins", "softness")]
+    assert torch.equal(swept[0, others], wrong[0, others])
+    assert torch.equal(steps_from_rendering(cartoon, content, example, truth), truth)  # nothing renders closer
+    watercolor = effects.create("watercolor")
+    given = watercolor.default_params().reshape(1, -1)
+    assert read_after_descent(watercolor, content, content, given) == []  # no steps to read
 
 
 def test_the_ink_threshold_comes_from_the_ink_share_and_the_response() -> None:

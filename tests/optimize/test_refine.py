@@ -9,7 +9,7 @@ from skimage import data
 import wise
 from wise import metrics
 from wise.errors import WiseError
-from wise.optimize.refine import GLOBAL_LEVELS, _levels, refine
+from wise.optimize.refine import GLOBAL_LEVELS, _levels, answers, refine
 from wise.optimize.trials import content_at
 
 
@@ -100,12 +100,35 @@ def test_refinement_holds_a_count_read_where_the_example_leaves_it_open(
     start = effect.params_from_dict({"bins": 3.0, "softness": 0.8, "contrast": 1.5})[None]
     read = effect.params_from_dict({"bins": 6.0, "softness": 0.8, "contrast": 1.5})[None]
     monkeypatch.setattr(refinement, "read_steps", lambda *args, **kwargs: (read.clone(), ()))  # left open
+    monkeypatch.setattr(refinement, "readable_after_descent", lambda effect: False)  # the count as descent left it
     outcome = refine(effect, photo, example, start, budget=30.0, max_iterations=30)
     bins = effect.param_names.index("bins")
     assert outcome.read is not None and outcome.read[0, bins] == read[0, bins]
     assert outcome.params[0, bins] == read[0, bins]
     moved = outcome.params[0] != outcome.read[0]
     assert moved.any(), "the other parameters descend"
+
+
+def test_a_count_descent_cannot_reach_is_read_after_it_and_judged_beside_it(
+    photo: torch.Tensor, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import wise.optimize.refine as refinement
+
+    effect = wise.effects.create("cartoon")
+    truth = effect.params_from_dict({"bins": 5.0, "softness": 0.2})[None]
+    with torch.no_grad():
+        example = effect(photo, truth)
+    start = effect.params_from_dict({"bins": 11.0, "softness": 0.2})[None]
+    monkeypatch.setattr(refinement, "read_steps", lambda effect, content, target, given, **kwargs: (given, ()))
+    monkeypatch.setattr(refinement, "fit_quickly", lambda effect, content, target, given, **kwargs: given)
+    outcome = refine(effect, photo, example, start, budget=30.0, max_iterations=4)
+    assert effect.params_to_dict(outcome.params[0])["bins"] > 9.0  # descent alone stays on its step
+    assert outcome.settled, "the count is read again after descent"
+    assert effect.params_to_dict(outcome.settled[0][0])["bins"] == pytest.approx(5.0, abs=0.25)
+    assert answers(outcome) == [outcome.params, *outcome.settled]
+    oilpaint = wise.effects.create("oilpaint")
+    outcome = refine(oilpaint, photo, photo, oilpaint.default_params()[None], budget=30.0, max_iterations=2)
+    assert outcome.settled == ()  # no steps to read after descent
 
 
 def test_global_refinement_descends_on_crops_of_a_large_copy_and_whole_small_ones() -> None:

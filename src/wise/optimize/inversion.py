@@ -48,7 +48,7 @@ import torch.nn.functional as F
 
 from wise.effects.base import Effect
 from wise.effects.cartoon import ABSTRACTION_ITERATIONS as CARTOON_PASSES
-from wise.effects.common import COLOUR_ADJUSTMENTS, detail_sigmas, edge_flow, edge_response, xdog_lines
+from wise.effects.common import COLOUR_ADJUSTMENTS, LUMINANCE_RANGE, detail_sigmas, edge_flow, edge_response, xdog_lines
 from wise.filters import adjust_color, lab_to_rgb, oriented_bilateral, rgb_to_lab
 from wise.filters.quantize import MIN_BINS, quantize
 from wise.optimize.parametric import Settings, closest, image_distance, optimize
@@ -96,6 +96,10 @@ SEARCH_LR = 0.1
 """The short discrete search: each candidate descended this often at this short side, at this rate."""
 CONTOUR_CANDIDATES = 61
 """Contour values tried over the parameter's range when reading the ink."""
+SETTLED_CONTOUR_REACH = 0.5
+SETTLED_CONTOUR_STEP = 0.05
+"""Contours tried when a cartoon's ink is read again after descent (:func:`read_after_descent`):
+within this reach of descent's, at the step of the full grid."""
 TIED_OVERLAP = 1e-6
 """Contours whose ink overlaps the example's within this much (pixel for pixel the same) mark it equally well."""
 STROKE_WIDTHS = 10
@@ -129,6 +133,16 @@ LEVEL_FIT_LR = 0.05
 seeded sample of plateau pixels, and the iterations and learning rate of its descent (fewer
 iterations at a higher rate left the colours a third further from the truth on the 18 trials
 of ``wise bench ppn``)."""
+
+
+SWEEP_PIXELS = 4096
+SWEEP_COARSE_STEP = 0.25
+SWEEP_FINE_STEP = 0.05
+SWEEP_COARSE_SOFTNESS = 6
+SWEEP_FINE_SOFTNESS = 21
+"""The sweep of a cartoon's steps through its rendering (:func:`steps_from_rendering`): a seeded
+sample of pixels; the bin counts tried over the range, then around the best; the softness
+values tried with each in either pass."""
 
 
 @dataclass
@@ -383,6 +397,84 @@ def colours_from_levels(
     return result.reshape(params.shape)
 
 
+def _cartoon_ink(
+    effect: Effect, luminance: torch.Tensor, tangent: torch.Tensor, p: dict[str, torch.Tensor], scale: float
+) -> torch.Tensor:
+    """The ink the cartoon's outlines multiply over its colours, from its abstracted ``luminance``
+    (L* / 100) and flow, as its rendering draws it."""
+    smoothing = detail_sigmas(p["details"])["edge_smoothing"]
+    return xdog_lines(
+        luminance, tangent, p["stroke_width"], p["contour"], p["blackness"], smoothing, effect.kernel_size, scale
+    )
+
+
+def _rendered_step_errors(
+    sample: tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor], bins: torch.Tensor, softness: torch.Tensor
+) -> torch.Tensor:
+    """The mean absolute error to the example's colours of the sampled pixels rendered with each
+    pair of ``bins`` and ``softness`` (flat, the same length)."""
+    luminance, chroma, ink, colours = sample
+    count, pixels = len(bins), luminance.numel()
+    levels = quantize(luminance.view(1, 1, 1, pixels).expand(count, 1, 1, pixels), bins, softness)
+    lab = torch.cat((levels * LUMINANCE_RANGE, chroma.view(1, 2, 1, pixels).expand(count, 2, 1, pixels)), dim=1)
+    rendered = (lab_to_rgb(lab) * ink.view(1, 1, 1, pixels)).clamp(0.0, 1.0)
+    return (rendered - colours.view(1, 3, 1, pixels)).abs().mean(dim=(1, 2, 3))
+
+
+def steps_from_rendering(
+    effect: Effect,
+    content: torch.Tensor,
+    example: torch.Tensor,
+    params: torch.Tensor,
+    abstraction: tuple[torch.Tensor, torch.Tensor] | None = None,
+) -> torch.Tensor:
+    """``params`` ``(1, P)`` with the cartoon's ``bins`` and ``softness`` whose rendering of
+    ``content``, the other parameters as they stand, is closest to ``example`` (L1) on a seeded
+    sample of :data:`SWEEP_PIXELS` pixels, where closer than the values as they stand.
+
+    Quantization is the pipeline's last stage before the outlines are multiplied: the abstracted
+    colours and the ink are computed once, and each pair costs a quantization and a conversion of
+    the sample, so the whole grid is tried (a coarse pass over the count's range, a fine one
+    around the best). Unlike the histogram's plateaus (:func:`plateau_bins`), the rendering
+    counts every pixel, clipped colours and outlines included, and unlike descent it does not
+    stall on the staircase: once the colours are near the example's, this reads a count that the
+    plateaus left open or read wrongly. ``abstraction``: the effect's abstracted colours and
+    flow of ``content`` at ``params``, where the caller has them."""
+    with torch.no_grad():
+        p, ctx = effect.real_values(content, params)
+        abstracted, tangent = effect.abstraction(content, p, ctx) if abstraction is None else abstraction
+        luminance = abstracted[:, :1] / LUMINANCE_RANGE
+        ink = _cartoon_ink(effect, luminance, tangent, p, ctx.scale)
+        generator = torch.Generator().manual_seed(0)
+        chosen = torch.randperm(luminance.numel(), generator=generator)[:SWEEP_PIXELS].to(content.device)
+        sample = (
+            luminance.flatten()[chosen].clamp(0.0, 1.0),
+            abstracted[0, 1:].flatten(1)[:, chosen],
+            ink.flatten()[chosen],
+            example[0].flatten(1)[:, chosen].to(abstracted),
+        )
+        like = {"dtype": abstracted.dtype, "device": abstracted.device}
+        bins_spec, softness_spec = effect.spec("bins"), effect.spec("softness")
+
+        def best_of(bins_grid: torch.Tensor, softness_values: int) -> tuple[float, float, float]:
+            softness_grid = torch.linspace(softness_spec.min, softness_spec.max, softness_values, **like)
+            bins = bins_grid.repeat_interleave(len(softness_grid))
+            softness = softness_grid.repeat(len(bins_grid))
+            errors = _rendered_step_errors(sample, bins, softness)
+            index = int(errors.argmin())
+            return float(errors[index]), float(bins[index]), float(softness[index])
+
+        low, high = max(bins_spec.min, MIN_BINS), bins_spec.max
+        coarse = best_of(torch.arange(low, high + 1e-6, SWEEP_COARSE_STEP, **like), SWEEP_COARSE_SOFTNESS)
+        reach = SWEEP_COARSE_STEP + 1e-6
+        around = torch.arange(coarse[1] - SWEEP_COARSE_STEP, coarse[1] + reach, SWEEP_FINE_STEP, **like)
+        error, bins, softness = best_of(around.clamp(low, high), SWEEP_FINE_SOFTNESS)
+        current = _rendered_step_errors(sample, p["bins"].reshape(1).to(**like), p["softness"].reshape(1).to(**like))
+    if error >= float(current[0]):
+        return params
+    return _with(effect, params, bins=bins, softness=softness).to(params)
+
+
 def _cartoon(effect: Effect, content: torch.Tensor, example: torch.Tensor, params: torch.Tensor) -> Reading:
     bins_spec, softness_spec = effect.spec("bins"), effect.spec("softness")
     bins_range, softness_range = (bins_spec.min, bins_spec.max), (softness_spec.min, softness_spec.max)
@@ -470,10 +562,12 @@ def _outline_reading(
     tangent: torch.Tensor,
     p: dict[str, torch.Tensor],
     scale: float,
+    contours: torch.Tensor | None = None,
 ) -> tuple[dict[str, float], float]:
     """``contour`` and ``blackness`` of the outlines of ``example``, read from its ink and the
     edge response of the abstracted ``luminance`` (empty where no outline shows), and how well
-    that threshold's ink overlaps the example's (intersection over union; -1 where none shows)."""
+    that threshold's ink overlaps the example's (intersection over union; -1 where none shows).
+    ``contours``: those tried (default: :data:`CONTOUR_CANDIDATES` over the parameter's range)."""
     smoothing = detail_sigmas(p["details"])["edge_smoothing"]
     flat, sharpened = (
         edge_response(luminance, tangent, p["stroke_width"], c, smoothing, effect.kernel_size, scale)
@@ -485,7 +579,7 @@ def _outline_reading(
         ink,
         flat,
         sharpened - flat,
-        torch.linspace(contour_spec.min, contour_spec.max, CONTOUR_CANDIDATES),
+        torch.linspace(contour_spec.min, contour_spec.max, CONTOUR_CANDIDATES) if contours is None else contours,
         (blackness_spec.min, blackness_spec.max),
         current=float(p["contour"].mean()),
         valid=visible,
@@ -522,6 +616,18 @@ def shading_from_example(drawing: torch.Tensor, luminance: torch.Tensor, low: fl
     return float(fitted.clamp(low, high))
 
 
+def _row_quantile(values: torch.Tensor, share: float) -> torch.Tensor:
+    """The ``share`` quantile of each row of ``values`` ``(R, N)``, interpolated linearly between
+    order statistics as :func:`torch.quantile` does, from two selections instead of a sort
+    (a third of the time for the 61 contours of a 512-pixel picture)."""
+    count = values.shape[1]
+    position = share * (count - 1)
+    below = min(int(position), count - 1)
+    low = torch.kthvalue(values, below + 1, dim=1).values
+    high = torch.kthvalue(values, min(below + 2, count), dim=1).values
+    return torch.lerp(low, high, torch.full_like(low, position - below))
+
+
 def xdog_threshold_from_ink(
     ink: torch.Tensor,
     flat: torch.Tensor,
@@ -545,7 +651,7 @@ def xdog_threshold_from_ink(
     flat, edges = flat[valid], edges[valid]
     responses = flat[None, :] + contours.to(flat)[:, None] * edges[None, :]
     stride = max(1, responses.shape[1] // 1_000_000)
-    blackness = torch.quantile(responses[:, ::stride], share, dim=1).clamp(*blackness_range)
+    blackness = _row_quantile(responses[:, ::stride], share).clamp(*blackness_range)
     drawn = responses < blackness[:, None]
     overlaps = (drawn & ink).sum(dim=1) / (drawn | ink).sum(dim=1).clamp_min(1)
     tried = list(zip(contours.tolist(), blackness.tolist(), overlaps.tolist()))
@@ -916,6 +1022,64 @@ def fit_quickly(
     return best.to(device=params.device, dtype=params.dtype).reshape(params.shape)
 
 
+def _contours_near(effect: Effect, contour: float) -> torch.Tensor:
+    """The contours within :data:`SETTLED_CONTOUR_REACH` of ``contour``, at :data:`SETTLED_CONTOUR_STEP`."""
+    spec = effect.spec("contour")
+    low, high = max(spec.min, contour - SETTLED_CONTOUR_REACH), min(spec.max, contour + SETTLED_CONTOUR_REACH)
+    return torch.linspace(low, high, max(2, round((high - low) / SETTLED_CONTOUR_STEP) + 1))
+
+
+def _cartoon_after_descent(
+    effect: Effect, content: torch.Tensor, example: torch.Tensor, params: torch.Tensor
+) -> list[torch.Tensor]:
+    """The count and ramps swept through the rendering (:func:`steps_from_rendering`), then the
+    outlines' threshold read again at the width as it stands, among contours within
+    :data:`SETTLED_CONTOUR_REACH` of descent's (:func:`_outline_reading`). Neither changes the
+    abstraction, so it is computed once."""
+    with torch.no_grad():
+        p, ctx = effect.real_values(content, params)
+        abstraction = effect.abstraction(content, p, ctx)
+        swept = steps_from_rendering(effect, content, example, params, abstraction)
+        luminance, tangent = abstraction[0][:, :1] / LUMINANCE_RANGE, abstraction[1]
+        contours = _contours_near(effect, float(p["contour"].mean()))
+        outlines = _outline_reading(effect, example, luminance, tangent, p, ctx.scale, contours)[0]
+    answers = [swept, _with(effect, swept, **outlines)] if outlines else [swept]
+    return [answer for answer in answers if not torch.equal(answer, params)]
+
+
+_AFTER_DESCENT: dict[str, Callable[[Effect, torch.Tensor, torch.Tensor, torch.Tensor], list[torch.Tensor]]] = {
+    "cartoon": _cartoon_after_descent,
+}
+"""xdog's threshold and shading read again after descent won in 15 of 18 trials, but the time
+kept back for it cost descent as much (BENCHMARKS.md, "Readings after descent")."""
+
+
+def readable_after_descent(effect: Effect) -> bool:
+    """Whether :func:`read_after_descent` has readings for ``effect``."""
+    return getattr(effect, "name", None) in _AFTER_DESCENT
+
+
+def read_after_descent(
+    effect: Effect, content: torch.Tensor, example: torch.Tensor, params: torch.Tensor, side: int = JUDGE_SIDE
+) -> list[torch.Tensor]:
+    """Other answers than ``params`` (normalized ``(1, P)``, where descent ended), read off
+    ``example`` with the other parameters as descent left them, on copies whose short side is
+    ``side`` at most; for the caller to judge by rendering (cartoon: the count and ramps swept
+    through the rendering, :func:`steps_from_rendering`, and the outlines read again; none for
+    other effects). For parameters near the answer: from a start far from it, the steps and the
+    ink would be read against the wrong colours."""
+    read = _AFTER_DESCENT.get(getattr(effect, "name", ""))
+    if read is None:
+        return []
+    small_content = _working_copy(content.detach(), side)
+    small_example = _working_copy(example.detach(), side).to(small_content)
+    given = params.detach().reshape(1, -1).to(small_content)
+    return [
+        answer.to(device=params.device, dtype=params.dtype).reshape(params.shape)
+        for answer in read(effect, small_content, small_example, given)
+    ]
+
+
 OUTLINE_PARAMS: dict[str, tuple[str, ...]] = {"cartoon": ("stroke_width", "contour", "blackness")}
 """The parameters that draw an effect's outlines over its colours (:func:`outline_darkening`)."""
 
@@ -926,16 +1090,7 @@ def outline_darkening(effect: Effect, content: torch.Tensor, params: torch.Tenso
     with torch.no_grad():
         p, ctx = effect.real_values(content, params)
         abstracted, tangent = effect.abstraction(content, p, ctx)
-        ink = xdog_lines(
-            abstracted[:, :1] / 100.0,
-            tangent,
-            p["stroke_width"],
-            p["contour"],
-            p["blackness"],
-            detail_sigmas(p["details"])["edge_smoothing"],
-            effect.kernel_size,
-            ctx.scale,
-        )
+        ink = _cartoon_ink(effect, abstracted[:, :1] / LUMINANCE_RANGE, tangent, p, ctx.scale)
     return float(1.0 - ink.mean())
 
 

@@ -132,6 +132,10 @@ class Outcome:
     """Where descent started when that was not the given start: the steps read off the target
     first (:func:`wise.optimize.refine.refine`). Descent on an image loss can leave a reading that
     fitted better, so the callers compare the two."""
+    settled: tuple[torch.Tensor, ...] = ()
+    """Answers read off the target once descent ended, from where it ended (the refinement's
+    :func:`~wise.optimize.inversion.read_after_descent`): steps and ink that descent cannot move
+    across their staircases, which the callers judge beside ``params``."""
 
 
 def image_distance(kind: str, output: torch.Tensor, target: torch.Tensor) -> torch.Tensor:

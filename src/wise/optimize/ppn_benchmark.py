@@ -19,9 +19,17 @@ import torch
 
 from wise import effects, metrics
 from wise.optimize.inversion import invert_steps, invertible
+from wise.optimize.parametric import Outcome
 from wise.optimize.refine import answers, refine
 from wise.optimize.trials import PSNR_CAP, Column, mean_of, random_reference, run_trials
 from wise.ppn.predictor import Predictor
+
+
+def _answer_kind(outcome: Outcome, final: torch.Tensor) -> str:
+    """Which of the refinement's answers ``final`` is: ``descent``, ``after descent`` or ``read``."""
+    if final is outcome.params:
+        return "descent"
+    return "after descent" if any(final is answer for answer in outcome.settled) else "read"
 
 
 def bench_ppn(
@@ -82,6 +90,7 @@ def bench_ppn(
                 "seconds": round(seconds + outcome.seconds, 2),
                 "params": effect.params_to_dict((final if kept else predicted)[0]),
                 "descent_kept": final is outcome.params,
+                "answer": _answer_kind(outcome, final),
             }
             row.update({f"refined_{key}": row["refined"][key] for key in ("ssim", "psnr", "seconds")})
         return row

@@ -20,7 +20,7 @@ import torch.nn.functional as F
 
 from wise.effects.base import Effect
 from wise.errors import WiseError
-from wise.optimize.inversion import HELD_PARAMS, fit_quickly, read_steps
+from wise.optimize.inversion import HELD_PARAMS, fit_quickly, read_after_descent, read_steps, readable_after_descent
 from wise.optimize.parametric import CROP_CONTEXT, Outcome, Settings, optimize_coarse_to_fine, optimize_on_crops
 
 
@@ -76,17 +76,22 @@ example's (at 128 pixels lines and steps are another picture); with that, the re
 about 1.4 s of the budget for xdog (BENCHMARKS.md, "The XDoG's tone read off its shading")."""
 INVERSION_MIN_BUDGET = 2.0
 """Budgets below this many seconds go to descent alone: the reading would take a quarter or more."""
+SETTLE_SECONDS = 1.0
+"""Seconds kept back at the end of the budget for the readings after descent
+(:func:`wise.optimize.inversion.read_after_descent`; cartoon at 512 pixels on a 2-core CPU: 0.5 s
+for the steps and the outlines, 0.8 s)."""
 RENDER_SHARE = 1.5
 """An iteration and the level's final render take about this many iterations' time: a level
 starts only when that much of the budget is left (estimated from the level before, per pixel)."""
 
 
 def answers(outcome: Outcome) -> list[torch.Tensor]:
-    """The refinement's candidate answers: the descended parameters, then the steps read off the
-    target before descent where the reading changed the start. Descent on the image loss can stray
-    from a reading that was right, so callers keep the one that re-creates the target best
-    (ties to descent)."""
-    return [outcome.params] if outcome.read is None else [outcome.params, outcome.read]
+    """The refinement's candidate answers: where descent ended, the readings from there after it
+    (:attr:`~wise.optimize.parametric.Outcome.settled`), and the steps read off the target before
+    descent where the reading changed the start. Descent on the image loss can stray from a
+    reading that was right, and a reading can be wrong where descent was right, so callers keep
+    the one that re-creates the target best (ties to the first)."""
+    return [outcome.params, *outcome.settled] + ([] if outcome.read is None else [outcome.read])
 
 
 def _levels(content: torch.Tensor, mode: str) -> list[Level]:
@@ -127,7 +132,8 @@ def refine(
     """Optimize from ``start`` (normalized ``(1, P)``) for about ``budget`` seconds; returns the
     outcome of the last level (its ``result`` at that level's size, none after crops; render the
     parameters at the photo's own size with :func:`wise.render.render`), with the steps read off the target
-    before descent as its ``read`` where the reading changed the start. ``max_iterations`` caps
+    before descent as its ``read`` where the reading changed the start, and the readings from where
+    descent ended as its ``settled`` (:func:`answers` lists them all). ``max_iterations`` caps
     the iterations, shared out over the levels (at least one each); ``loss`` defaults to the
     mode's (:data:`REFINE_LOSSES`)."""
     if not budget > 0:
@@ -157,13 +163,18 @@ def refine(
         read = None if torch.equal(params, start.reshape(params.shape)) else params
     losses: list[float] = []
     outcome: Outcome | None = None
+    # after descent, the steps and the ink read again: with the colours near the example's, a count
+    # the plateaus left open or read wrongly shows, one descent cannot move across the staircase
+    # (BENCHMARKS.md, "Readings after descent")
+    settling = start.dim() <= 2 and budget >= INVERSION_MIN_BUDGET and readable_after_descent(effect)
+    kept_back = SETTLE_SECONDS if settling else 0.0
     seconds_per_pixel = 0.0  # of an iteration and a render at the level before
     for index, level in enumerate(plan):
         factor = level.side / min(content.shape[-2:])
         size = (max(8, round(content.shape[-2] * factor)), max(8, round(content.shape[-1] * factor)))
         rendered = size[0] * size[1] if level.crop is None else (level.crop + 2 * CROP_CONTEXT) ** 2
         # the level's share of what is left, so that a level that ends early leaves its time to the next
-        left = budget - (time.perf_counter() - began)
+        left = budget - kept_back - (time.perf_counter() - began)
         if left <= seconds_per_pixel * rendered:  # not even one iteration would fit
             break
         settings = Settings(
@@ -190,6 +201,9 @@ def refine(
         losses.extend(outcome.losses)
         if outcome.interrupted:
             break
+    settled: tuple[torch.Tensor, ...] = ()
+    if settling and not (outcome is not None and outcome.interrupted):
+        settled = tuple(read_after_descent(effect, content, target, params))
     if outcome is None:
-        return Outcome(params=params.detach().clone(), seconds=time.perf_counter() - began, read=read)
-    return replace(outcome, losses=losses, seconds=time.perf_counter() - began, read=read)
+        return Outcome(params=params.detach().clone(), seconds=time.perf_counter() - began, read=read, settled=settled)
+    return replace(outcome, losses=losses, seconds=time.perf_counter() - began, read=read, settled=settled)
