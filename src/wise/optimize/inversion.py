@@ -41,7 +41,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, NamedTuple
 
 import torch
 import torch.nn.functional as F
@@ -408,9 +408,18 @@ def _cartoon_ink(
     )
 
 
-def _rendered_step_errors(
-    sample: tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor], bins: torch.Tensor, softness: torch.Tensor
-) -> torch.Tensor:
+class _SampledPixels(NamedTuple):
+    """What the cartoon's last stages need of a sample of ``N`` pixels: the abstracted luminance
+    ``(N,)`` (L* / 100) and chroma ``(2, N)`` (a*, b*), the outlines' ink ``(N,)``, and the
+    example's colours there ``(3, N)``."""
+
+    luminance: torch.Tensor
+    chroma: torch.Tensor
+    ink: torch.Tensor
+    colours: torch.Tensor
+
+
+def _rendered_step_errors(sample: _SampledPixels, bins: torch.Tensor, softness: torch.Tensor) -> torch.Tensor:
     """The mean absolute error to the example's colours of the sampled pixels rendered with each
     pair of ``bins`` and ``softness`` (flat, the same length)."""
     luminance, chroma, ink, colours = sample
@@ -447,11 +456,11 @@ def steps_from_rendering(
         ink = _cartoon_ink(effect, luminance, tangent, p, ctx.scale)
         generator = torch.Generator().manual_seed(0)
         chosen = torch.randperm(luminance.numel(), generator=generator)[:SWEEP_PIXELS].to(content.device)
-        sample = (
-            luminance.flatten()[chosen].clamp(0.0, 1.0),
-            abstracted[0, 1:].flatten(1)[:, chosen],
-            ink.flatten()[chosen],
-            example[0].flatten(1)[:, chosen].to(abstracted),
+        sample = _SampledPixels(
+            luminance=luminance.flatten()[chosen].clamp(0.0, 1.0),
+            chroma=abstracted[0, 1:].flatten(1)[:, chosen],
+            ink=ink.flatten()[chosen],
+            colours=example[0].flatten(1)[:, chosen].to(abstracted),
         )
         like = {"dtype": abstracted.dtype, "device": abstracted.device}
         bins_spec, softness_spec = effect.spec("bins"), effect.spec("softness")
