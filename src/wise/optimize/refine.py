@@ -78,8 +78,8 @@ INVERSION_MIN_BUDGET = 2.0
 """Budgets below this many seconds go to descent alone: the reading would take a quarter or more."""
 SETTLE_SECONDS = 1.0
 """Seconds kept back at the end of the budget for the readings after descent
-(:func:`wise.optimize.inversion.read_after_descent`; cartoon at 512 pixels on a 2-core CPU: 0.5 s
-for the steps and the outlines, 0.8 s)."""
+(:func:`wise.optimize.inversion.read_after_descent`): the cartoon's steps and outlines take about
+0.8 s at 512 pixels on a 2-core CPU."""
 RENDER_SHARE = 1.5
 """An iteration and the level's final render take about this many iterations' time: a level
 starts only when that much of the budget is left (estimated from the level before, per pixel)."""
@@ -148,7 +148,8 @@ def refine(
     per_level = MAX_LEVEL_ITERATIONS if max_iterations is None else max(1, math.ceil(max_iterations / len(plan)))
     # the staircase parameters read off the example, within the budget
     params, held, read = start, (), None
-    if start.dim() <= 2 and budget >= INVERSION_MIN_BUDGET:
+    reading = start.dim() <= 2 and budget >= INVERSION_MIN_BUDGET  # global parameters, time to read
+    if reading:
         given = start.reshape(1, -1)
         params, held = read_steps(effect, content, target, given, side=INVERSION_SIDE)
         if not torch.equal(params, given.to(params)):
@@ -166,7 +167,7 @@ def refine(
     # after descent, the steps and the ink read again: with the colours near the example's, a count
     # the plateaus left open or read wrongly shows, one descent cannot move across the staircase
     # (BENCHMARKS.md, "Readings after descent")
-    settling = start.dim() <= 2 and budget >= INVERSION_MIN_BUDGET and readable_after_descent(effect)
+    settling = reading and readable_after_descent(effect)
     kept_back = SETTLE_SECONDS if settling else 0.0
     seconds_per_pixel = 0.0  # of an iteration and a render at the level before
     for index, level in enumerate(plan):
