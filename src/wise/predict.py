@@ -101,6 +101,7 @@ def predict_files(
             "iterations": len(outcome.losses),
             "seconds": round(outcome.seconds, 2),
             "mode": refine_mode,
+            "answers": len(scored),
             "kept": kept,
             "descent_kept": descended,
         }

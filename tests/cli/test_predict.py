@@ -26,6 +26,7 @@ from wise.optimize.trials import content_at, random_reference
 from wise.paramfile import load_params
 from wise.ppn.modelfile import ModelInfo, save_model
 from wise.ppn.predictor import Predictor
+from wise.render import render
 
 SRC = Path(wise.__file__).resolve().parent.parent
 
@@ -80,18 +81,28 @@ def test_predict_refines_from_the_prediction_within_its_budget(files: dict[str, 
     cartoon = wise.effects.create("cartoon")  # the fused kernels compiled (once per machine) before the clock
     params = cartoon.default_params()[None].requires_grad_(True)
     cartoon(torch.rand(1, 3, 32, 32), params).mean().backward()
+    torch.optim.Adam([params])  # and the compiler stack that the first optimizer imports (once per process)
     began = time.perf_counter()
     code, printed = run_in_process(
         ["predict", "cartoon", "--content", str(root / "photo.png"), "--target", str(root / "example.png"),
-         "-o", str(root / "refined"), "--model", str(root / "cartoon-model.safetensors"), "--budget", "4"]
+         "-o", str(root / "refined"), "--model", str(root / "cartoon-model.safetensors"), "--budget", "6"]
     )  # fmt: skip
     elapsed = time.perf_counter() - began
     assert code == 0 and "refined for" in printed
     scores = json.loads((root / "refined" / "metrics.json").read_text())
     refinement, network = scores["refinement"], scores["network"]
-    assert refinement["iterations"] >= 5 and refinement["budget"] == 4.0
-    assert refinement["seconds"] <= 4.0 + 0.5, "each level stops once its share of the budget is spent"
-    assert elapsed < 4.0 + 3.0, "prediction, renders and files within seconds of the budget"
+    # the readings take seconds of it (more on a busy machine); descent has the rest
+    assert refinement["iterations"] >= 3 and refinement["budget"] == 6.0
+    assert refinement["seconds"] <= 6.0 + 0.5, "each level stops once its share of the budget is spent"
+    # after the budget: one full-size render for the network and one per distinct answer, timed
+    # here under the same load (tests share the machine), and little else
+    content = read_image(root / "photo.png")
+    timed = time.perf_counter()
+    render(cartoon, content, cartoon.default_params()[None])
+    one_render = time.perf_counter() - timed
+    assert 1 <= refinement["answers"] <= 4
+    renders = 1 + refinement["answers"]
+    assert elapsed < refinement["seconds"] + 1.5 * renders * one_render + 1.5, "prediction, renders and files"
     # the result is the better of the two
     assert scores["ssim"] == max(refinement["ssim"], network["ssim"])
     assert refinement["kept"] == (refinement["ssim"] >= network["ssim"])
@@ -201,16 +212,18 @@ def test_the_built_in_model_predicts_at_512_pixels_within_a_second(effect: str, 
     with torch.no_grad():
         example = model(torch.from_numpy(np.array(photo)).permute(2, 0, 1)[None] / 255.0, model.default_params()[None])
     Image.fromarray((example[0].permute(1, 2, 0).numpy() * 255).round().astype(np.uint8)).save(tmp_path / "ex.png")
-    # the whole command with its default refinement once; the network alone for the others
-    refinement = [] if effect == "xdog" else ["--refine", "0"]
-    began = time.perf_counter()
-    process = subprocess.run(
-        [sys.executable, "-m", "wise", "predict", effect, "--content", str(tmp_path / "photo.png"),
-         "--target", str(tmp_path / "ex.png"), "-o", str(tmp_path / "out"), *refinement],
-        capture_output=True, text=True, env=_env(), timeout=120,
-    )  # fmt: skip
-    seconds = time.perf_counter() - began
-    assert process.returncode == 0, process.stderr
+    command = ["predict", effect, "--content", str(tmp_path / "photo.png"), "--target", str(tmp_path / "ex.png"),
+               "-o", str(tmp_path / "out")]  # fmt: skip
+    if effect == "xdog":  # the whole command with its default refinement, in a new process, once
+        began = time.perf_counter()
+        process = subprocess.run(
+            [sys.executable, "-m", "wise", *command], capture_output=True, text=True, env=_env(), timeout=120
+        )
+        seconds = time.perf_counter() - began
+        assert process.returncode == 0, process.stderr
+        assert seconds < 30.0  # 10 s on the development machine; CI machines are slower
+    else:  # the network alone for the others
+        code, printed = run_in_process([*command, "--refine", "0"])
+        assert code == 0, printed
     scores = json.loads((tmp_path / "out" / "metrics.json").read_text())
     assert scores["model"] == f"builtin:{effect}" and scores["seconds"] < 1.0
-    assert seconds < 30.0  # 10 s on the development machine; CI machines are slower

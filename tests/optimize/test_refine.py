@@ -9,6 +9,7 @@ from skimage import data
 import wise
 from wise import metrics
 from wise.errors import WiseError
+from wise.optimize.parametric import Outcome
 from wise.optimize.refine import GLOBAL_LEVELS, _levels, answers, refine
 from wise.optimize.trials import content_at
 
@@ -125,10 +126,19 @@ def test_a_count_descent_cannot_reach_is_read_after_it_and_judged_beside_it(
     assert effect.params_to_dict(outcome.params[0])["bins"] > 9.0  # descent alone stays on its step
     assert outcome.settled, "the count is read again after descent"
     assert effect.params_to_dict(outcome.settled[0][0])["bins"] == pytest.approx(5.0, abs=0.25)
-    assert answers(outcome) == [outcome.params, *outcome.settled]
+    listed = answers(outcome)
+    assert listed[0] is outcome.params and any(answer is outcome.settled[0] for answer in listed)
     oilpaint = wise.effects.create("oilpaint")
     outcome = refine(oilpaint, photo, photo, oilpaint.default_params()[None], budget=30.0, max_iterations=2)
     assert outcome.settled == ()  # no steps to read after descent
+
+
+def test_the_answers_list_each_candidate_once_in_order() -> None:
+    descended, reading, other = torch.zeros(1, 3), torch.ones(1, 3), torch.full((1, 3), 0.5)
+    outcome = Outcome(params=descended, settled=(reading.clone(), descended.clone(), other), read=reading.clone())
+    listed = answers(outcome)
+    assert len(listed) == 3, "a reading equal to an earlier answer is not judged again"
+    assert listed[0] is descended and torch.equal(listed[1], reading) and listed[2] is other
 
 
 def test_global_refinement_descends_on_crops_of_a_large_copy_and_whole_small_ones() -> None:

@@ -90,8 +90,14 @@ def answers(outcome: Outcome) -> list[torch.Tensor]:
     (:attr:`~wise.optimize.parametric.Outcome.settled`), and the steps read off the target before
     descent where the reading changed the start. Descent on the image loss can stray from a
     reading that was right, and a reading can be wrong where descent was right, so callers keep
-    the one that re-creates the target best (ties to the first)."""
-    return [outcome.params, *outcome.settled] + ([] if outcome.read is None else [outcome.read])
+    the one that re-creates the target best (ties to the first). Each answer is listed once, so
+    that none is rendered twice."""
+    candidates = [outcome.params, *outcome.settled] + ([] if outcome.read is None else [outcome.read])
+    distinct: list[torch.Tensor] = []
+    for candidate in candidates:
+        if not any(candidate.shape == seen.shape and torch.equal(candidate, seen) for seen in distinct):
+            distinct.append(candidate)
+    return distinct
 
 
 def _levels(content: torch.Tensor, mode: str) -> list[Level]:
