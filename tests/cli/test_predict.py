@@ -81,7 +81,6 @@ def test_predict_refines_from_the_prediction_within_its_budget(files: dict[str, 
     cartoon = wise.effects.create("cartoon")  # the fused kernels compiled (once per machine) before the clock
     params = cartoon.default_params()[None].requires_grad_(True)
     cartoon(torch.rand(1, 3, 32, 32), params).mean().backward()
-    torch.optim.Adam([params])  # and the compiler stack that the first optimizer imports (once per process)
     began = time.perf_counter()
     code, printed = run_in_process(
         ["predict", "cartoon", "--content", str(root / "photo.png"), "--target", str(root / "example.png"),

@@ -51,6 +51,7 @@ from wise.effects.cartoon import ABSTRACTION_ITERATIONS as CARTOON_PASSES
 from wise.effects.common import COLOUR_ADJUSTMENTS, LUMINANCE_RANGE, detail_sigmas, edge_flow, edge_response, xdog_lines
 from wise.filters import adjust_color, lab_to_rgb, oriented_bilateral, rgb_to_lab
 from wise.filters.quantize import MIN_BINS, quantize
+from wise.optimize.adam import Adam
 from wise.optimize.parametric import Settings, closest, image_distance, optimize
 from wise.params import NORMALIZED_MAX, NORMALIZED_MIN
 
@@ -341,7 +342,7 @@ def fit_colours_to_levels(
     held = torch.ones(params.shape[-1], dtype=torch.bool, device=params.device)
     held[_colour_indices(effect)] = False
     descended = params.detach().clone().requires_grad_()
-    optimizer = torch.optim.Adam([descended], lr=FIT_LR)
+    optimizer = Adam([descended], lr=FIT_LR)
     for _ in range(FIT_ITERATIONS):
         optimizer.zero_grad(set_to_none=True)
         p, ctx = effect.real_values(content, descended)
@@ -382,7 +383,7 @@ def colours_from_levels(
     spans = torch.tensor([spec.span for spec in specs], dtype=params.dtype, device=params.device)
     names = [spec.name for spec in specs]
     fitted = params.detach()[0, indices].clone().requires_grad_()
-    optimizer = torch.optim.Adam([fitted], lr=LEVEL_FIT_LR)
+    optimizer = Adam([fitted], lr=LEVEL_FIT_LR)
     for _ in range(LEVEL_FIT_ITERATIONS):  # callers may hold autograd off; this descent needs it
         optimizer.zero_grad(set_to_none=True)
         with torch.enable_grad():

@@ -26,6 +26,7 @@ from wise.filters.clamp import inward_gradients
 from wise.filters.color import rgb_to_lab
 from wise.filters.gaussian import gaussian_blur
 from wise.filters.smoothing import annealed_temperature, smoothed_steps, softened_gradients
+from wise.optimize.adam import Adam
 from wise.params import NORMALIZED_MAX, NORMALIZED_MIN, check_params, clamp_masks
 from wise.vgg import StyleLoss, load_vgg19
 
@@ -199,14 +200,14 @@ def _hold(params: torch.Tensor, effect: Effect, held: tuple[str, ...]) -> None:
         params.grad[:, [effect.param_names.index(name) for name in held]] = 0.0
 
 
-def _decay_learning_rate(optimizer: torch.optim.Optimizer, iteration: int) -> None:
+def _decay_learning_rate(optimizer: Adam, iteration: int) -> None:
     """The paper's schedule: x 0.98 every 5 iterations from iteration 50."""
     if iteration >= DECAY_FROM and iteration % DECAY_EVERY == 0:
         for group in optimizer.param_groups:
             group["lr"] *= DECAY
 
 
-def _schedule_learning_rate(optimizer: torch.optim.Optimizer, settings: Settings, iteration: int, start: float) -> None:
+def _schedule_learning_rate(optimizer: Adam, settings: Settings, iteration: int, start: float) -> None:
     """After ``iteration``: the paper's decay, or with ``settings.final_lr`` the learning rate
     lowered along a half cosine over the progress to that share of ``settings.lr`` at the end."""
     if settings.final_lr is None:
@@ -269,7 +270,7 @@ def optimize(
         raise WiseError(f"content {tuple(content.shape)} and target {tuple(target.shape)} differ in size")
     image_loss = _image_loss(settings.loss, content, target, settings.vgg_weights)
     params = initial_params(effect, init.to(content), settings.mode, tuple(content.shape[-2:])).requires_grad_()
-    optimizer = torch.optim.Adam([params], lr=settings.lr)
+    optimizer = Adam([params], lr=settings.lr)
     outcome = Outcome(params=params.detach())
     start = time.perf_counter()
     output = None
@@ -429,7 +430,7 @@ def optimize_on_crops(
     scale = min(height, width) / REFERENCE_SHORT_SIDE
     generator = generator if generator is not None else torch.Generator().manual_seed(0)
     params = initial_params(effect, init.to(content), "global", (height, width)).requires_grad_()
-    optimizer = torch.optim.Adam([params], lr=settings.lr)
+    optimizer = Adam([params], lr=settings.lr)
     outcome = Outcome(params=params.detach())
     start = time.perf_counter()
     iterations: deque[float] = deque(maxlen=RECENT_ITERATIONS)

@@ -147,9 +147,6 @@ def refine(
     loss = loss if loss is not None else REFINE_LOSSES.get(mode, "l2")
     _compile_kernels(effect, content, start)
     began = time.perf_counter()
-    # the first optimizer of a process imports the compiler stack (seconds): inside the budget,
-    # but before the levels share it out
-    torch.optim.Adam([torch.zeros(1, requires_grad=True)])
     plan = _levels(content, mode)
     per_level = MAX_LEVEL_ITERATIONS if max_iterations is None else max(1, math.ceil(max_iterations / len(plan)))
     # the staircase parameters read off the example, within the budget
