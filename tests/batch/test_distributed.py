@@ -147,18 +147,19 @@ def test_resumes_skips_and_overwrites(
         job.output.parent.mkdir(parents=True, exist_ok=True)
         job.output.write_bytes(reference[job.output.name])
 
-    rest = run_on_ray(LOOK, jobs)
+    # one actor: this test is about the files, not about parallelism (each actor's start costs seconds)
+    rest = run_on_ray(LOOK, jobs, workers=1)
     assert rest.skipped == 2 and rest.done == len(SIZES) - 2 and len(rest.failed) == 1
     corrupt = os.path.relpath(photos / "sub" / "corrupt.jpg")
     assert rest.failed[0].input == corrupt and rest.failed[0].error.startswith(f"{corrupt}: ")
     assert {path.name: path.read_bytes() for path in out.rglob("*.png")} == reference
 
     (out / "photo0.png").write_bytes(b"not the result")  # what a skip would keep
-    again = run_on_ray(LOOK, good)
+    again = run_on_ray(LOOK, good, workers=1)
     assert again.skipped == len(SIZES) and again.done == 0 and again.ok
     assert (out / "photo0.png").read_bytes() == b"not the result"
 
-    redone = run_on_ray(LOOK, good[:1], overwrite=True)
+    redone = run_on_ray(LOOK, good[:1], overwrite=True, workers=1)
     assert redone.done == 1 and redone.skipped == 0 and redone.ok
     assert (out / "photo0.png").read_bytes() == reference["photo0.png"]
     assert ray.is_initialized()  # a cluster it joined is left running
@@ -183,7 +184,7 @@ def test_ctrl_c_stops_and_the_files_are_whole(cluster, photos: Path, reference: 
     out.mkdir()
     jobs[0].output.write_bytes(reference[jobs[0].output.name])  # finished before, to be skipped
     log = _StopAfterFirst()
-    summary = run_on_ray(LOOK, jobs, log=log)
+    summary = run_on_ray(LOOK, jobs, log=log, workers=1)  # one actor, as above
     assert summary.interrupted and not summary.ok
     assert log.lines[0] == SKIPPED and summary.done + len(summary.failed) == 1
     assert summary.remaining == len(jobs) - 2
@@ -191,7 +192,7 @@ def test_ctrl_c_stops_and_the_files_are_whole(cluster, photos: Path, reference: 
         assert not path.name.startswith(".") and path.read_bytes() == reference[path.name]
         with Image.open(path) as image:
             image.load()
-    finished = run_on_ray(LOOK, jobs)  # the same command finishes the batch
+    finished = run_on_ray(LOOK, jobs, workers=1)  # the same command finishes the batch
     assert finished.ok and finished.done + finished.skipped == len(jobs)
     assert all(is_complete(job) for job in jobs)
 
