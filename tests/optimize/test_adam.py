@@ -34,6 +34,18 @@ def test_a_tensor_without_gradient_stays_and_bad_settings_are_refused() -> None:
     optimizer = Adam([still], lr=0.1)
     optimizer.step()
     assert torch.equal(still, torch.ones(3))
+    # a tensor that has a gradient only from the fourth step on counts its steps from there, as in PyTorch
+    ours = [torch.ones(2, requires_grad=True) for _ in range(2)]
+    theirs = [torch.ones(2, requires_grad=True) for _ in range(2)]
+    mine, reference = Adam(ours, lr=0.1), torch.optim.Adam(theirs, lr=0.1)
+    for step in range(8):
+        for optimizer, (first, late) in ((mine, ours), (reference, theirs)):
+            optimizer.zero_grad()
+            loss = (first * 3.0).sum() + ((late**2).sum() if step >= 3 else 0.0)
+            loss.backward()
+            optimizer.step()
+    assert torch.equal(ours[0], theirs[0]) and torch.equal(ours[1], theirs[1])
+    assert not torch.equal(ours[1], torch.ones(2))
     with pytest.raises(ValueError, match="lr"):
         Adam([still], lr=-1.0)
     with pytest.raises(ValueError, match="at least one"):

@@ -29,7 +29,7 @@ class Adam:
             raise ValueError(f"invalid Adam settings: lr {lr}, betas {betas}, eps {eps}")
         self.param_groups: list[dict[str, Any]] = [{"params": tensors, "lr": lr}]
         self.betas, self.eps = betas, eps
-        self.steps = 0
+        self._steps = [0] * len(tensors)  # per tensor, counting only the steps it had a gradient in
         self._first_moments = [torch.zeros_like(t, memory_format=torch.preserve_format) for t in tensors]
         self._second_moments = [torch.zeros_like(t, memory_format=torch.preserve_format) for t in tensors]
 
@@ -42,14 +42,16 @@ class Adam:
 
     @torch.no_grad()
     def step(self) -> None:
-        self.steps += 1
         beta1, beta2 = self.betas
         group = self.param_groups[0]
-        step_size = group["lr"] / (1.0 - beta1**self.steps)
-        second_correction = math.sqrt(1.0 - beta2**self.steps)
-        for tensor, first, second in zip(group["params"], self._first_moments, self._second_moments):
+        moments = zip(self._first_moments, self._second_moments)
+        for index, (tensor, (first, second)) in enumerate(zip(group["params"], moments)):
             if tensor.grad is None:
                 continue
+            self._steps[index] += 1
+            steps = self._steps[index]
+            step_size = group["lr"] / (1.0 - beta1**steps)
+            second_correction = math.sqrt(1.0 - beta2**steps)
             gradient = tensor.grad
             first.lerp_(gradient, 1.0 - beta1)
             second.mul_(beta2).addcmul_(gradient, gradient, value=1.0 - beta2)
