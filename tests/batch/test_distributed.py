@@ -64,6 +64,13 @@ def _good(jobs: list[Job]) -> list[Job]:
     return [job for job in jobs if job.source.suffix == ".png"]
 
 
+def _finished_before(jobs: list[Job], reference: dict[str, bytes]) -> None:
+    """The results of ``jobs`` written as an earlier run left them (a pipeline less to start)."""
+    for job in jobs:
+        job.output.parent.mkdir(parents=True, exist_ok=True)
+        job.output.write_bytes(reference[job.output.name])
+
+
 def test_without_ray_the_error_is_one_line(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     monkeypatch.setitem(sys.modules, "ray", None)
     with pytest.raises(WiseError) as caught:
@@ -143,9 +150,7 @@ def test_resumes_skips_and_overwrites(
     jobs = plan([os.path.relpath(photos)], out)
     good = _good(jobs)
 
-    for job in good[:2]:  # what a run stopped half way leaves (a pipeline less to start)
-        job.output.parent.mkdir(parents=True, exist_ok=True)
-        job.output.write_bytes(reference[job.output.name])
+    _finished_before(good[:2], reference)  # what a run stopped half way leaves
 
     # one actor: this test is about the files, not about parallelism (each actor's start costs seconds)
     rest = run_on_ray(LOOK, jobs, workers=1)
@@ -181,8 +186,7 @@ class _StopAfterFirst(JsonLog):
 def test_ctrl_c_stops_and_the_files_are_whole(cluster, photos: Path, reference: dict[str, bytes], tmp_path: Path):
     out = tmp_path / "out"
     jobs = _good(plan([str(photos)], out))
-    out.mkdir()
-    jobs[0].output.write_bytes(reference[jobs[0].output.name])  # finished before, to be skipped
+    _finished_before(jobs[:1], reference)  # to be skipped
     log = _StopAfterFirst()
     summary = run_on_ray(LOOK, jobs, log=log, workers=1)  # one actor, as above
     assert summary.interrupted and not summary.ok
