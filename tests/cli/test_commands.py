@@ -231,8 +231,12 @@ def test_refusals_as_subprocess(tmp_path: Path, photo: Path) -> None:
     # all at once: each refusal is an interpreter's start, and the cases share nothing
     processes = {
         case: subprocess.Popen(
-            [sys.executable, "-m", "wise", *argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-            env=env, cwd=tmp_path,
+            [sys.executable, "-m", "wise", *argv],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=env,
+            cwd=tmp_path,
         )  # fmt: skip
         for case, (argv, _, _) in cases.items()
     }

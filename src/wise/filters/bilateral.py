@@ -149,7 +149,7 @@ def bilateral_pass(
     step = pixel_step(direction)
 
     taps = (image, direction, step, spatial, neg_inv_two_spatial_sq, neg_inv_two_range_sq)
-    if fused.enabled(*taps):
+    if fused.drjit_enabled(*taps):
         from wise.filters.fused.bilateral import BilateralTaps
 
         total, norm = BilateralTaps.apply(*taps, n, SUPPORT)

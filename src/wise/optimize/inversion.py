@@ -311,9 +311,7 @@ def _level_targets(
     return used, low[used], high[used], lab[0, 1:].flatten(1)[:, used] / 100.0
 
 
-def _level_loss(
-    abstracted: torch.Tensor, low: torch.Tensor, high: torch.Tensor, chroma: torch.Tensor
-) -> torch.Tensor:
+def _level_loss(abstracted: torch.Tensor, low: torch.Tensor, high: torch.Tensor, chroma: torch.Tensor) -> torch.Tensor:
     """How far abstracted colours ``(3, N)`` (CIE Lab / 100) are from lying where the quantizer maps
     them to the example's levels, with the example's chroma."""
     luminance = abstracted[0]

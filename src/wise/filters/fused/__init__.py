@@ -1,4 +1,4 @@
-"""Fused CPU kernels for the filters' sample loops, compiled by Numba.
+"""Fused CPU kernels for the filters' sample loops, compiled by Dr.Jit or Numba.
 
 The PyTorch filters of :mod:`wise.filters` set off one full-image tensor per sample and per
 arithmetic step; on the CPU most of their time is memory traffic. Each module here holds the
@@ -7,9 +7,12 @@ PyTorch function it speeds up and under the same names: ``fused/gaussian.py`` ac
 ``gaussian.py``. The PyTorch path stays the reference (the tests compare with it) and the
 path on every other device.
 
-Which path runs is decided per call by :func:`enabled`: fused on CPU tensors of float32 or
-float64 when Numba is installed, unless the environment variable ``WISE_KERNELS=torch`` asks
-for the PyTorch path. Compiled code is cached on disk (next to the sources, or in Numba's
+Two engines compile them, while the kernels move from the first to the second: Dr.Jit
+(:mod:`wise.filters.fused._drjit`; vectorized across pixels, with its own compiled-code cache)
+for the kernels written for it, Numba for the others. Which path runs is decided per call by
+:func:`drjit_enabled` and :func:`enabled`: fused on CPU tensors of float32 or float64 when the
+engine works, unless the environment variable ``WISE_KERNELS=torch`` asks for the PyTorch path.
+Numba's compiled code is cached on disk (next to the sources, or in Numba's
 per-user cache folder where the package is read-only), so only the first process compiles.
 
 Kernels run on as many threads as PyTorch uses (:func:`torch.get_num_threads`), and one at a
@@ -32,6 +35,8 @@ import torch
 ENVIRONMENT_VARIABLE = "WISE_KERNELS"
 """``torch`` selects the PyTorch path everywhere; ``fused`` (or unset) the fused kernels on the CPU."""
 
+REQUESTS = ("torch", "fused")
+
 FASTMATH = {"nsz", "arcp", "contract", "reassoc"}
 """LLVM flags for the kernels: reordering and fused multiply-add, but finite-math is not
 assumed (a Gaussian weight may underflow to 0 and a sample may be exactly at the border)."""
@@ -51,7 +56,7 @@ def numba_available() -> bool:
 def requested() -> str:
     """The path the environment asks for: ``"torch"`` or ``"fused"``."""
     value = os.environ.get(ENVIRONMENT_VARIABLE, "fused").strip().lower() or "fused"
-    if value not in ("torch", "fused"):
+    if value not in REQUESTS:
         from wise.errors import WiseError
 
         raise WiseError(f"{ENVIRONMENT_VARIABLE} must be 'torch' or 'fused', got {value!r}")
@@ -65,6 +70,19 @@ def enabled(*tensors: torch.Tensor) -> bool:
         return False
     dtype = tensors[0].dtype
     return all(t.device.type == "cpu" and t.dtype == dtype for t in tensors) and dtype in _DTYPES
+
+
+def drjit_enabled(*tensors: torch.Tensor) -> bool:
+    """Whether the Dr.Jit kernels compute an operation on ``tensors``: all on the CPU, of one
+    floating-point dtype the kernels handle, Dr.Jit's CPU backend working and not switched off."""
+    if requested() == "torch":
+        return False
+    dtype = tensors[0].dtype
+    if not (all(t.device.type == "cpu" and t.dtype == dtype for t in tensors) and dtype in _DTYPES):
+        return False
+    from wise.filters.fused._drjit import llvm_backend
+
+    return llvm_backend()
 
 
 def _numba():

@@ -1,0 +1,122 @@
+"""The Dr.Jit engine of the fused kernels: finding LLVM, moving tensors in and out, threads.
+
+Dr.Jit (the engine of the Mitsuba 3 renderer) traces array code in which each SIMD lane is a
+pixel, fuses it into one kernel and compiles it with LLVM on the CPU (vectorized over 8 or 16
+pixels, parallel over blocks of pixels) or for CUDA. Kernels are cached on disk, keyed by their
+code, so a process pays the compilation only for kernels no process has compiled before.
+
+The CPU backend loads the system's ``libLLVM`` at run time. Without it the kernels of this
+engine are off, the filters run on the PyTorch path, and :data:`MISSING_LLVM_NOTICE` says once
+on stderr how to get the fast path.
+"""
+
+from __future__ import annotations
+
+import glob
+import importlib.util
+import os
+import re
+import sys
+import threading
+from contextlib import contextmanager
+from typing import Iterator
+
+import torch
+
+LIBLLVM_VARIABLE = "DRJIT_LIBLLVM_PATH"
+"""Dr.Jit's own variable for the ``libLLVM`` it loads; set, it is used as it is."""
+
+LIBRARY_FOLDERS = (
+    "/usr/lib/x86_64-linux-gnu",
+    "/usr/lib/aarch64-linux-gnu",
+    "/usr/lib64",
+    "/usr/lib",
+    "/usr/local/lib",
+    "/usr/lib/llvm-*/lib",
+    "/opt/homebrew/opt/llvm/lib",
+    "/usr/local/opt/llvm/lib",
+)
+"""Where :func:`find_libllvm` looks for ``libLLVM`` (Debian and Ubuntu, Fedora, Homebrew)."""
+
+MISSING_LLVM_NOTICE = (
+    "the fast CPU kernels need the LLVM library (on Debian or Ubuntu: `sudo apt-get install libllvm19`, "
+    f"or set {LIBLLVM_VARIABLE} to a libLLVM); rendering on the slower PyTorch path"
+)
+
+_lock = threading.Lock()
+_state: dict[str, bool] = {}
+
+
+def _version(path: str) -> tuple[int, ...]:
+    numbers = re.findall(r"\d+", os.path.basename(path))
+    return tuple(int(n) for n in numbers) or (0,)
+
+
+def find_libllvm() -> str | None:
+    """The newest ``libLLVM`` shared library in :data:`LIBRARY_FOLDERS`, or ``None``."""
+    found: list[str] = []
+    for folder in LIBRARY_FOLDERS:
+        for pattern in ("libLLVM-*.so*", "libLLVM.so.*", "libLLVM.dylib"):
+            found.extend(glob.glob(os.path.join(folder, pattern)))
+    found = [path for path in found if os.path.isfile(path)]
+    return max(found, key=_version) if found else None
+
+
+def drjit_installed() -> bool:
+    return importlib.util.find_spec("drjit") is not None
+
+
+def llvm_backend() -> bool:
+    """Whether Dr.Jit's CPU backend works in this process (imports Dr.Jit the first time)."""
+    if "llvm" not in _state:
+        _state["llvm"] = _start_llvm()
+    return _state["llvm"]
+
+
+def _start_llvm() -> bool:
+    if not drjit_installed():
+        return False
+    if LIBLLVM_VARIABLE not in os.environ:
+        library = find_libllvm()
+        if library is not None:
+            os.environ[LIBLLVM_VARIABLE] = library
+    import drjit
+
+    working = bool(drjit.has_backend(drjit.JitBackend.LLVM))
+    if not working:
+        print(f"wise: {MISSING_LLVM_NOTICE}", file=sys.stderr, flush=True)
+    return working
+
+
+def float_type(dtype: torch.dtype):
+    """Dr.Jit's CPU array type of ``dtype`` (float32 or float64)."""
+    import drjit.llvm as backend
+
+    return backend.Float64 if dtype == torch.float64 else backend.Float32
+
+
+def flat(tensor: torch.Tensor, array_type, shape: torch.Size | tuple[int, ...] | None = None):
+    """``tensor`` (broadcast to ``shape``) as a flat Dr.Jit array, sharing memory where it is contiguous."""
+    value = tensor.detach()
+    if shape is not None:
+        value = value.expand(shape)
+    return array_type(value.contiguous().reshape(-1))
+
+
+def to_torch(arrays, shape: tuple[int, ...]) -> torch.Tensor:
+    """Evaluated flat arrays of one picture channel each (``shape`` without the channel) stacked
+    on dimension 1: ``(B, len(arrays), H, W)``."""
+    return torch.stack([a.torch().view(shape) for a in arrays], dim=1)
+
+
+@contextmanager
+def kernel_threads() -> Iterator[None]:
+    """Trace and run a kernel on as many threads as PyTorch uses, one kernel at a time in the
+    process (the editor's server renders in threads)."""
+    import drjit
+
+    with _lock:
+        threads = max(1, torch.get_num_threads())
+        if drjit.thread_count() != threads:
+            drjit.set_thread_count(threads)
+        yield

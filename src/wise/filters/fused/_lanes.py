@@ -1,0 +1,113 @@
+"""Pixels as SIMD lanes for the Dr.Jit kernels: indices, per-pixel loads and bilinear samples.
+
+A kernel works on flat arrays with one lane per pixel of a ``(B, H, W)`` grid. :class:`Grid`
+holds the lanes' coordinates; its methods gather a pixel's values from ``(B, C, H, W)`` images
+and ``(B, 1, H, W)`` maps stored flat, and sample an image bilinearly with clamped borders,
+the sampling of ``grid_sample(mode="bilinear", padding_mode="border", align_corners=True)``.
+
+Minima and maxima of floats are written as selections: LLVM 15 and older cannot compile the
+``llvm.minimum`` intrinsic that Dr.Jit emits for them on x86.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import drjit as dr
+from drjit.llvm import UInt32
+
+
+def maximum(a, b):
+    return dr.select(a > b, a, b)
+
+
+def minimum(a, b):
+    return dr.select(a < b, a, b)
+
+
+@dataclass
+class Corners:
+    """A position's four bilinear neighbours (flat offsets within a channel), the fractions
+    towards the upper ones, and whether each axis moves with the position (not clamped)."""
+
+    top_left: object
+    top_right: object
+    bottom_left: object
+    bottom_right: object
+    fx: object
+    fy: object
+    moves_x: object
+    moves_y: object
+
+
+class Grid:
+    """One lane per pixel of ``batch`` pictures of ``height x width``, with ``Float`` arithmetic."""
+
+    def __init__(self, batch: int, height: int, width: int, float_type) -> None:
+        self.batch, self.height, self.width = batch, height, width
+        self.Float = float_type
+        self.plane = height * width
+        index = dr.arange(UInt32, batch * self.plane)
+        self.pixel = index % self.plane
+        self.picture = index // self.plane
+        self.x = float_type(self.pixel % width)
+        self.y = float_type(self.pixel // width)
+
+    def channel_start(self, channel: int, channels: int):
+        """Flat offset of the lane's picture's ``channel`` in a ``(B, channels, H, W)`` array."""
+        return (self.picture * channels + channel) * self.plane
+
+    def load(self, array, channel: int = 0, channels: int = 1):
+        """The lane's own pixel of ``channel`` of a flat ``(B, channels, H, W)`` array."""
+        return dr.gather(self.Float, array, self.channel_start(channel, channels) + self.pixel)
+
+    def locate(self, x, y) -> Corners:
+        """The bilinear neighbours of the position ``(x, y)`` in pixels, clamped to the picture."""
+        fx, x0, x1, moves_x = self._axis(x, self.width)
+        fy, y0, y1, moves_y = self._axis(y, self.height)
+        top, bottom = y0 * self.width, y1 * self.width
+        return Corners(top + x0, top + x1, bottom + x0, bottom + x1, fx, fy, moves_x, moves_y)
+
+    def _axis(self, position, size: int):
+        moves = (position > 0) & (position < size - 1)
+        clamped = minimum(maximum(position, 0.0), float(size - 1))
+        lower = UInt32(clamped)  # truncation is the floor of a non-negative position
+        upper = dr.select(moves, lower + 1, lower)
+        return clamped - self.Float(lower), lower, upper, moves
+
+    def corner_values(self, array, corners: Corners, start):
+        """The four corner values of the channel starting at ``start`` of a flat image."""
+        return (
+            dr.gather(self.Float, array, start + corners.top_left),
+            dr.gather(self.Float, array, start + corners.top_right),
+            dr.gather(self.Float, array, start + corners.bottom_left),
+            dr.gather(self.Float, array, start + corners.bottom_right),
+        )
+
+    def sample(self, array, corners: Corners, start):
+        """The bilinear value of the channel starting at ``start``."""
+        top_left, top_right, bottom_left, bottom_right = self.corner_values(array, corners, start)
+        top = dr.fma(corners.fx, top_right - top_left, top_left)
+        bottom = dr.fma(corners.fx, bottom_right - bottom_left, bottom_left)
+        return dr.fma(corners.fy, bottom - top, top)
+
+    def sample_with_slopes(self, array, corners: Corners, start):
+        """The bilinear value and its derivatives along x and y (unclamped)."""
+        top_left, top_right, bottom_left, bottom_right = self.corner_values(array, corners, start)
+        top_slope = top_right - top_left
+        bottom_slope = bottom_right - bottom_left
+        top = dr.fma(corners.fx, top_slope, top_left)
+        bottom = dr.fma(corners.fx, bottom_slope, bottom_left)
+        value = dr.fma(corners.fy, bottom - top, top)
+        return value, dr.fma(corners.fy, bottom_slope - top_slope, top_slope), bottom - top
+
+    def scatter(self, target, value, corners: Corners, start) -> None:
+        """Add ``value`` to the four corners with the bilinear weights (the adjoint of :meth:`sample`),
+        into per-thread copies of ``target`` summed at the end (no atomics contend)."""
+        top = value * (1.0 - corners.fy)
+        bottom = value * corners.fy
+        mode = dr.ReduceMode.Expand
+        dr.scatter_add(target, top * (1.0 - corners.fx), start + corners.top_left, mode=mode)
+        dr.scatter_add(target, top * corners.fx, start + corners.top_right, mode=mode)
+        dr.scatter_add(target, bottom * (1.0 - corners.fx), start + corners.bottom_left, mode=mode)
+        dr.scatter_add(target, bottom * corners.fx, start + corners.bottom_right, mode=mode)
