@@ -5,7 +5,7 @@ BIN := $(VENV)/bin
 # The CPU build of PyTorch; override, e.g. `make install TORCH_SPEC=torch` for a CUDA build.
 TORCH_SPEC ?= torch==2.13.0
 
-.PHONY: install demo test bench edit screenshot clean
+.PHONY: install llvm demo test bench edit screenshot clean
 
 install: $(VENV)/.installed
 
@@ -15,8 +15,22 @@ $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet "$(TORCH_SPEC)"
 	$(BIN)/python -m pip install --quiet -e ".[dev]"
+	$(BIN)/python -m wise.filters.fused.llvm || $(MAKE) --no-print-directory llvm
 	$(BIN)/python -m wise.effects.compile float32 float64
 	touch $@
+
+# The Dr.Jit kernels load the system's LLVM (15 or newer). Installed with apt-get where this runs
+# as root on Debian or Ubuntu; elsewhere the command to run is printed, and the filters run on the
+# slower PyTorch path until then.
+llvm:
+	@if command -v apt-get >/dev/null 2>&1 && [ "$$(id -u)" -eq 0 ]; then \
+		echo "installing the LLVM library for the fast CPU kernels (apt-get, about a minute)"; \
+		apt-get update -qq && { DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libllvm19 >/dev/null 2>&1 || \
+			DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libllvm15 >/dev/null; } || true; \
+		$(BIN)/python -m wise.filters.fused.llvm || true; \
+	else \
+		echo "for the fast CPU kernels install LLVM 15 or newer, e.g. \`sudo apt-get install libllvm15\`"; \
+	fi
 
 demo: install
 	$(BIN)/python -m wise.demo --out out

@@ -45,6 +45,9 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=2)
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--local", action="store_true", help="per-pixel masks instead of global values")
+    parser.add_argument(
+        "--mode", default="forward+backward", choices=["forward+backward", "forward", "render"], help="what is timed"
+    )
     args = parser.parse_args()
 
     with tempfile.TemporaryDirectory(prefix="wise-ab-") as folder:
@@ -60,7 +63,7 @@ def main() -> None:
                         case = dict(
                             effect_name=effect,
                             size=size,
-                            mode="forward+backward",
+                            mode=args.mode,
                             local=args.local,
                             repeat=args.repeat,
                             kernel_size=3,
@@ -74,6 +77,7 @@ def main() -> None:
         finally:
             subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(base_tree)], check=False)
 
+    print(f"{args.mode}:")
     print(f"| effect | size x batch | base ({args.base}) | this | speed-up | memory |")
     print("| --- | --- | --- | --- | --- | --- |")
     for effect in args.effects:

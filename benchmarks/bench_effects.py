@@ -34,6 +34,7 @@ def run_case(
     from skimage import data
 
     import wise
+    import wise.render
 
     torch.manual_seed(0)
     photo = torch.from_numpy(data.astronaut()).permute(2, 0, 1)[None].float() / 255.0
@@ -47,6 +48,8 @@ def run_case(
         if mode == "forward":
             with torch.no_grad():
                 effect(image, params)
+        elif mode == "render":  # the path of `wise apply`, video and the editor
+            wise.render.render(effect, image, params)
         else:
             p = params.clone().requires_grad_()
             out = effect(image, p)

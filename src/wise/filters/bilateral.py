@@ -143,18 +143,16 @@ def bilateral_pass(
     s = resolution_scale(image) if scale is None else scale
     spatial = (as_map(sigma_d, image, "sigma_d") * s).clamp_min(MIN_SIGMA)
     neg_inv_two_range_sq = -0.5 / as_map(sigma_r, image, "sigma_r").clamp_min(MIN_SIGMA).square()
-    neg_inv_two_spatial_sq = -0.5 / spatial.square()
     n = min(samples, _merged_samples_needed(max_value(spatial)))
     direction = direction.expand(image.shape[0], -1, -1, -1)
+    if fused.drjit_enabled(image, direction, spatial, neg_inv_two_range_sq):
+        from wise.filters.fused.bilateral import BilateralPass
+
+        return BilateralPass.apply(image, direction, spatial, neg_inv_two_range_sq, n, SUPPORT)
+
     step = pixel_step(direction)
-
-    taps = (image, direction, step, spatial, neg_inv_two_spatial_sq, neg_inv_two_range_sq)
-    if fused.drjit_enabled(*taps):
-        from wise.filters.fused.bilateral import BilateralTaps
-
-        total, norm = BilateralTaps.apply(*taps, n, SUPPORT)
-    else:
-        total, norm = _BilateralTaps.apply(*taps, n)
+    neg_inv_two_spatial_sq = -0.5 / spatial.square()
+    total, norm = _BilateralTaps.apply(image, direction, step, spatial, neg_inv_two_spatial_sq, neg_inv_two_range_sq, n)
     return (image + total) / (1.0 + norm)
 
 

@@ -17,6 +17,7 @@ import importlib.util
 import os
 import re
 import sys
+import tempfile
 import threading
 from contextlib import contextmanager
 from typing import Iterator
@@ -39,7 +40,7 @@ LIBRARY_FOLDERS = (
 """Where :func:`find_libllvm` looks for ``libLLVM`` (Debian and Ubuntu, Fedora, Homebrew)."""
 
 MISSING_LLVM_NOTICE = (
-    "the fast CPU kernels need the LLVM library (on Debian or Ubuntu: `sudo apt-get install libllvm19`, "
+    "the fast CPU kernels need the LLVM library (on Debian or Ubuntu: `sudo apt-get install libllvm15` or newer, "
     f"or set {LIBLLVM_VARIABLE} to a libLLVM); rendering on the slower PyTorch path"
 )
 
@@ -80,12 +81,33 @@ def _start_llvm() -> bool:
         library = find_libllvm()
         if library is not None:
             os.environ[LIBLLVM_VARIABLE] = library
-    import drjit
+    with _stderr_of_native_code() as messages:
+        import drjit
 
-    working = bool(drjit.has_backend(drjit.JitBackend.LLVM))
+        working = bool(drjit.has_backend(drjit.JitBackend.LLVM))
     if not working:
-        print(f"wise: {MISSING_LLVM_NOTICE}", file=sys.stderr, flush=True)
+        reason = next((line for line in reversed(messages) if "too old" in line), "")
+        detail = " (the LLVM found is too old: Dr.Jit needs 15 or newer)" if reason else ""
+        print(f"wise: {MISSING_LLVM_NOTICE}{detail}", file=sys.stderr, flush=True)
     return working
+
+
+@contextmanager
+def _stderr_of_native_code() -> Iterator[list[str]]:
+    """Collect what native code writes to the process's stderr inside the block (Dr.Jit reports a
+    missing or unusable LLVM in several lines of its own; the notice says it in one)."""
+    lines: list[str] = []
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile(mode="w+b") as captured:
+        os.dup2(captured.fileno(), 2)
+        try:
+            yield lines
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            captured.seek(0)
+            lines.extend(captured.read().decode(errors="replace").splitlines())
 
 
 def float_type(dtype: torch.dtype):
@@ -101,6 +123,20 @@ def flat(tensor: torch.Tensor, array_type, shape: torch.Size | tuple[int, ...] |
     if shape is not None:
         value = value.expand(shape)
     return array_type(value.contiguous().reshape(-1))
+
+
+def map_array(tensor: torch.Tensor, array_type, batch: int) -> tuple[object, bool]:
+    """A ``(B, 1, H, W)`` or ``(B, 1, 1, 1)`` map (a batch of 1 broadcasts) as a flat array, and
+    whether it holds a value per pixel (see :meth:`wise.filters.fused._lanes.Grid.load_map`)."""
+    per_pixel = tensor.shape[-1] * tensor.shape[-2] > 1
+    shape = (batch, 1, *tensor.shape[-2:])
+    return flat(tensor, array_type, shape), per_pixel
+
+
+def as_tensor(array, shape: tuple[int, ...]) -> torch.Tensor:
+    """An evaluated flat array as a tensor of ``shape``. Kernels write into Dr.Jit's own arrays
+    (``drjit.zeros``), not into tensors' memory: a scatter may move its target to a new buffer."""
+    return array.torch().view(shape)
 
 
 def to_torch(arrays, shape: tuple[int, ...]) -> torch.Tensor:

@@ -61,6 +61,17 @@ class Grid:
         """The lane's own pixel of ``channel`` of a flat ``(B, channels, H, W)`` array."""
         return dr.gather(self.Float, array, self.channel_start(channel, channels) + self.pixel)
 
+    def load_map(self, array, per_pixel: bool):
+        """The lane's value of a flat map: ``(B, 1, H, W)`` where ``per_pixel``, else one value per
+        picture ``(B, 1, 1, 1)`` (never expanded to the picture's size)."""
+        return self.load(array) if per_pixel else dr.gather(self.Float, array, self.picture)
+
+    def store(self, target, value, channel: int = 0, channels: int = 1) -> None:
+        """Write ``value`` to the lane's own pixel of ``channel`` of a flat zero-filled output
+        (an addition, which lets the writes of several channels share one kernel)."""
+        index = self.channel_start(channel, channels) + self.pixel
+        dr.scatter_add(target, value, index, mode=dr.ReduceMode.Direct)
+
     def locate(self, x, y) -> Corners:
         """The bilinear neighbours of the position ``(x, y)`` in pixels, clamped to the picture."""
         fx, x0, x1, moves_x = self._axis(x, self.width)

@@ -13,10 +13,12 @@ and ``far = 2j s``:
   ``exp(|v - I(p)|^2 r)`` with ``r = -1 / (2 sigma_r^2)`` (Euclidean distance over channels);
 - samples with ``near > support * sigma_d`` are left out, except the nearest pair (``j = 1``).
 
-Returns ``sum w v`` (``(B, C, H, W)``) and ``sum w`` (``(B, 1, H, W)``) with
-``w = w_pair * exp(|v - I(p)|^2 r)``. Arithmetic is in the image's dtype. Backward recomputes
-every sample; it gathers the gradients of the direction, the pixel step and both coefficients per
-pixel and scatters the image's gradient through the bilinear samples.
+The pass is ``(I(p) + sum w v) / (1 + sum w)`` with ``w = w_pair * exp(|v - I(p)|^2 r)``; the pixel
+step ``s = 1 / max(|u_x|, |u_y|)`` and ``a`` are computed in the kernel from the direction and
+``sigma_d``, and maps of one value per picture are read as such, so a pass is one kernel over the
+pixels. Arithmetic is in the image's dtype. Backward recomputes every sample; it gathers the
+gradients of the direction, ``sigma_d`` and ``r`` per pixel and scatters the image's gradient
+through the bilinear samples.
 """
 
 from __future__ import annotations
@@ -27,7 +29,7 @@ import drjit as dr
 import torch
 
 from wise.filters.fused import reduce_to
-from wise.filters.fused._drjit import flat, float_type, kernel_threads, to_torch
+from wise.filters.fused._drjit import as_tensor, flat, float_type, kernel_threads, map_array
 from wise.filters.fused._lanes import Grid, maximum
 
 _MIN_PAIR_WEIGHT = 1e-30
@@ -36,9 +38,13 @@ _MIN_PAIR_WEIGHT = 1e-30
 _SIDES = (1.0, -1.0)
 
 
+_MIN_DIRECTION = 1e-6
+"""Floor of the direction's major component in the pixel step, as in :func:`wise.filters.flow.pixel_step`."""
+
+
 @dataclass
 class _Inputs:
-    """The kernel's inputs as flat arrays, per-pixel maps loaded into the lanes."""
+    """The kernel's inputs: the flat image and the lanes' own values of everything per pixel."""
 
     grid: Grid
     image: object
@@ -52,27 +58,25 @@ class _Inputs:
     r: object
 
     @classmethod
-    def of(cls, image, direction, step, spatial, neg_a, neg_r) -> "_Inputs":
+    def of(cls, image, direction, spatial, neg_r) -> "_Inputs":
         b, c, h, w = image.shape
         Float = float_type(image.dtype)
         grid = Grid(b, h, w, Float)
         pixels = flat(image, Float)
-
-        def per_pixel(map_: torch.Tensor):
-            return grid.load(flat(map_.to(image.dtype), Float, (b, 1, h, w)))
-
-        directions = flat(direction.to(image.dtype), Float, (b, 2, h, w))
+        directions = flat(direction, Float, (b, 2, h, w))
+        ux, uy = grid.load(directions, 0, 2), grid.load(directions, 1, 2)
+        sigma = grid.load_map(*map_array(spatial, Float, b))
         return cls(
             grid,
             pixels,
             c,
             [grid.load(pixels, k, c) for k in range(c)],
-            grid.load(directions, 0, 2),
-            grid.load(directions, 1, 2),
-            per_pixel(step),
-            per_pixel(spatial),
-            per_pixel(neg_a),
-            per_pixel(neg_r),
+            ux,
+            uy,
+            1.0 / maximum(maximum(dr.abs(ux), dr.abs(uy)), _MIN_DIRECTION),
+            sigma,
+            -0.5 / (sigma * sigma),
+            grid.load_map(*map_array(neg_r, Float, b)),
         )
 
 
@@ -98,7 +102,7 @@ class _Pair:
         return cls(near, far, w_near, w_far, w_pair, distance, inside)
 
 
-def _forward(inputs: _Inputs, samples: int, support: float):
+def _forward(inputs: _Inputs, samples: int, support: float, output, norm_output) -> None:
     grid, channels = inputs.grid, inputs.channels
     starts = [grid.channel_start(k, channels) for k in range(channels)]
     totals = [grid.Float(0.0) for _ in range(channels)]
@@ -115,18 +119,27 @@ def _forward(inputs: _Inputs, samples: int, support: float):
             weight = w_pair * dr.exp(range_sq * inputs.r)
             norm += weight
             totals = [dr.fma(weight, value, total) for value, total in zip(values, totals)]
-    dr.eval(*totals, norm)
-    return totals, norm
+    scale = 1.0 / (1.0 + norm)
+    for k, (centre, total) in enumerate(zip(inputs.centre, totals)):
+        grid.store(output, (centre + total) * scale, k, channels)
+    grid.store(norm_output, norm)
+    dr.eval(output, norm_output)
 
 
-def _backward(inputs: _Inputs, samples: int, support: float, grad_total, grad_norm, need_image: bool):
+def _backward(inputs: _Inputs, samples: int, support: float, g_output, output, norm, g_image, g_maps):
+    """The gradients: the image's scattered into ``g_image`` (``None`` when not needed), and per
+    pixel the direction's two components, ``sigma_d``'s and ``r``'s into the four channels of ``g_maps``."""
     grid, channels = inputs.grid, inputs.channels
     Float = grid.Float
     starts = [grid.channel_start(k, channels) for k in range(channels)]
-    g_total = [grid.load(grad_total, k, channels) for k in range(channels)]
-    g_norm = grid.load(grad_norm)
-    g_image = dr.zeros(Float, grid.batch * channels * grid.plane) if need_image else None
-    g_centre = [Float(0.0) for _ in range(channels)]
+    # through the normalization (I + T) / (1 + N): the sums' gradients and the centre's own
+    scale = 1.0 / (1.0 + grid.load(norm))
+    g_passed = [grid.load(g_output, k, channels) * scale for k in range(channels)]
+    g_total = g_passed
+    g_norm = Float(0.0)
+    for k, g in enumerate(g_passed):
+        g_norm -= g * grid.load(output, k, channels)
+    g_centre = list(g_passed)
     g_ux, g_uy, g_s, g_a, g_r = (Float(0.0) for _ in range(5))
     for j in range(1, samples + 1):
         pair = _Pair.of(j, inputs, support)
@@ -151,10 +164,10 @@ def _backward(inputs: _Inputs, samples: int, support: float, grad_total, grad_no
             for k, ((_, slope_x, slope_y), difference, g) in enumerate(zip(sampled, differences, g_total)):
                 through_range = g_per_difference * difference
                 g_value = dr.fma(g, weight, through_range)
-                g_centre[k] -= through_range
+                g_centre[k] = g_centre[k] - through_range  # not in place: the list shares g_total's arrays
                 g_offset_x = dr.fma(moves_x * g_value, slope_x, g_offset_x)
                 g_offset_y = dr.fma(moves_y * g_value, slope_y, g_offset_y)
-                if need_image:
+                if g_image is not None:
                     grid.scatter(g_image, g_value, corners, starts[k])
         # the chain rule through the geometry both sides share: d_j(near, far), near and far of s and a
         g_ux = dr.fma(g_offset_x, pair.distance, g_ux)
@@ -166,56 +179,70 @@ def _backward(inputs: _Inputs, samples: int, support: float, grad_total, grad_no
         g_far = g_w_far * pair.w_far * 2.0 * pair.far * inputs.a + g_distance_per_pair * pair.w_far
         g_a += g_w_near * pair.w_near * pair.near * pair.near + g_w_far * pair.w_far * pair.far * pair.far
         g_s += g_near * (2 * j - 1) + g_far * (2 * j)
-    outputs = [*g_centre, g_ux, g_uy, g_s, g_a, g_r]
-    dr.eval(*outputs, *([g_image] if need_image else []))
-    return g_image, outputs
+    # the pixel step 1 / max(|u_x|, |u_y|) passes its gradient to the major component
+    x_major = dr.abs(inputs.ux) >= dr.abs(inputs.uy)
+    major = dr.select(x_major, inputs.ux, inputs.uy)
+    g_major = -g_s * inputs.step * inputs.step * dr.sign(major)
+    g_major = dr.select(dr.abs(major) > _MIN_DIRECTION, g_major, 0.0)
+    grid.store(g_maps, g_ux + dr.select(x_major, g_major, 0.0), 0, 4)
+    grid.store(g_maps, g_uy + dr.select(x_major, 0.0, g_major), 1, 4)
+    grid.store(g_maps, g_a / (inputs.spatial * inputs.spatial * inputs.spatial), 2, 4)  # a = -1 / (2 sigma^2)
+    grid.store(g_maps, g_r, 3, 4)
+    if g_image is not None:
+        for k, g in enumerate(g_centre):
+            dr.scatter_add(g_image, g, starts[k] + grid.pixel, mode=dr.ReduceMode.Expand)
+        dr.eval(g_maps, g_image)
+    else:
+        dr.eval(g_maps)
 
 
-class BilateralTaps(torch.autograd.Function):
-    """The fused :class:`wise.filters.bilateral._BilateralTaps`; ``support`` is the cut-off in sigmas
+class BilateralPass(torch.autograd.Function):
+    """The fused :func:`wise.filters.bilateral.bilateral_pass` from its prepared inputs: the image,
+    the direction ``(B, 2, H, W)``, ``sigma_d`` in pixels and ``r = -1 / (2 sigma_r^2)`` (maps of
+    ``(B, 1, H, W)`` or ``(B, 1, 1, 1)``); ``support`` is the cut-off in sigmas
     (:data:`wise.filters.gaussian.SUPPORT`), passed in to keep this module free of the PyTorch filters."""
 
     @staticmethod
-    def forward(  # type: ignore[override]
-        ctx, image, direction, step, spatial, neg_inv_two_spatial_sq, neg_inv_two_range_sq, n: int, support: float
-    ):
-        inputs = (image, direction, step, spatial, neg_inv_two_spatial_sq, neg_inv_two_range_sq)
+    def forward(ctx, image, direction, spatial, neg_inv_two_range_sq, n: int, support: float):  # type: ignore[override]
         b, c, h, w = image.shape
         with kernel_threads():
-            totals, norm = _forward(_Inputs.of(*inputs), n, support)
-            total, norm = to_torch(totals, (b, h, w)), to_torch([norm], (b, h, w))
-        ctx.save_for_backward(*inputs)
+            inputs = _Inputs.of(image, direction, spatial, neg_inv_two_range_sq)
+            Float = inputs.grid.Float
+            output_array, norm_array = dr.zeros(Float, b * c * h * w), dr.zeros(Float, b * h * w)
+            _forward(inputs, n, support, output_array, norm_array)
+            output, norm = as_tensor(output_array, (b, c, h, w)), as_tensor(norm_array, (b, 1, h, w))
+        ctx.save_for_backward(image, direction, spatial, neg_inv_two_range_sq, output, norm)
         ctx.n, ctx.support = n, support
-        return total, norm
+        return output
 
     @staticmethod
-    def backward(ctx, grad_total, grad_norm):  # type: ignore[override]
-        inputs = ctx.saved_tensors
-        image, direction, step, _, neg_a, neg_r = inputs
+    def backward(ctx, grad_output):  # type: ignore[override]
+        image, direction, spatial, neg_r, output, norm = ctx.saved_tensors
         b, c, h, w = image.shape
         need = ctx.needs_input_grad
         with kernel_threads():
-            kernel_inputs = _Inputs.of(*inputs)
-            Float = kernel_inputs.grid.Float
-            g_image, outputs = _backward(
-                kernel_inputs,
+            inputs = _Inputs.of(image, direction, spatial, neg_r)
+            Float = inputs.grid.Float
+            # Dr.Jit's own array: the per-thread copies of a scatter are summed into a new buffer
+            g_image_array = dr.zeros(Float, b * c * h * w) if need[0] else None
+            g_maps_array = dr.zeros(Float, b * 4 * h * w)
+            _backward(
+                inputs,
                 ctx.n,
                 ctx.support,
-                flat(grad_total.to(image.dtype), Float, (b, c, h, w)),
-                flat(grad_norm.to(image.dtype), Float, (b, 1, h, w)),
-                need[0],
+                flat(grad_output, Float, (b, c, h, w)),
+                flat(output, Float),
+                flat(norm, Float),
+                g_image_array,
+                g_maps_array,
             )
-            g_centre = to_torch(outputs[:c], (b, h, w))
-            g_direction = to_torch(outputs[c : c + 2], (b, h, w))
-            g_step, g_a, g_r = (to_torch([o], (b, h, w)) for o in outputs[c + 2 :])
-            g_image = g_image.torch().view(b, c, h, w) + g_centre if need[0] else None
+            g_image = as_tensor(g_image_array, (b, c, h, w)) if need[0] else None
+            g_maps = as_tensor(g_maps_array, (b, 4, h, w))
         return (
             g_image,
-            reduce_to(g_direction, direction.shape) if need[1] else None,
-            reduce_to(g_step, step.shape) if need[2] else None,
-            None,
-            reduce_to(g_a, neg_a.shape) if need[4] else None,
-            reduce_to(g_r, neg_r.shape) if need[5] else None,
+            reduce_to(g_maps[:, 0:2], direction.shape) if need[1] else None,
+            reduce_to(g_maps[:, 2:3], spatial.shape) if need[2] else None,
+            reduce_to(g_maps[:, 3:4], neg_r.shape) if need[3] else None,
             None,
             None,
         )

@@ -1,0 +1,70 @@
+"""The Dr.Jit engine: finding LLVM, and the PyTorch path with one notice line without it."""
+
+import os
+import subprocess
+import sys
+
+import pytest
+
+from wise.filters.fused._drjit import LIBLLVM_VARIABLE, MISSING_LLVM_NOTICE, find_libllvm, llvm_backend
+
+SCRIPT = """
+import torch
+from tests.filters.paths import kernels
+from wise.filters.bilateral import bilateral_pass
+image = torch.rand(1, 3, 24, 24, generator=torch.Generator().manual_seed(0), requires_grad=True)
+direction = torch.zeros(1, 2, 24, 24)
+direction[:, 0] = 1.0
+fused = bilateral_pass(image, direction, 2.0, 0.2, scale=1.0)
+fused.sum().backward()
+with kernels("torch"):
+    reference = bilateral_pass(image, direction, 2.0, 0.2, scale=1.0)
+bilateral_pass(image, direction, 2.0, 0.2, scale=1.0)
+print(float((fused - reference).abs().max().detach()))
+"""
+
+
+def _run_without_llvm(library: str) -> subprocess.CompletedProcess:
+    env = {**os.environ, LIBLLVM_VARIABLE: library, "PYTHONPATH": os.getcwd()}
+    return subprocess.run([sys.executable, "-c", SCRIPT], capture_output=True, text=True, env=env, timeout=120)
+
+
+def test_without_llvm_the_filters_run_on_the_pytorch_path_with_one_notice(tmp_path) -> None:
+    done = _run_without_llvm(str(tmp_path / "libLLVM.so"))
+    assert done.returncode == 0, done.stderr
+    assert float(done.stdout.strip()) == 0.0  # the same path as the reference
+    assert done.stderr.strip().splitlines() == [f"wise: {MISSING_LLVM_NOTICE}"]
+
+
+def test_an_llvm_too_old_is_named_in_the_notice() -> None:
+    old = [
+        os.path.join(folder, name)
+        for folder in ("/usr/lib/x86_64-linux-gnu", "/usr/lib/aarch64-linux-gnu")
+        if os.path.isdir(folder)
+        for name in os.listdir(folder)
+        if name.startswith(("libLLVM-14", "libLLVM-13"))
+    ]
+    if not old:
+        pytest.skip("no LLVM older than 15 on this machine")
+    done = _run_without_llvm(old[0])
+    assert done.returncode == 0, done.stderr
+    (line,) = done.stderr.strip().splitlines()
+    assert line.startswith(f"wise: {MISSING_LLVM_NOTICE}") and "too old" in line
+
+
+def test_the_newest_llvm_is_chosen(tmp_path, monkeypatch: pytest.MonkeyPatch) -> None:
+    for name in ("libLLVM-14.so.1", "libLLVM-19.so.1", "libLLVM-15.so", "libLLVM.so.17.0"):
+        (tmp_path / name).write_bytes(b"")
+    monkeypatch.setattr("wise.filters.fused._drjit.LIBRARY_FOLDERS", (str(tmp_path),))
+    assert os.path.basename(find_libllvm()) == "libLLVM-19.so.1"
+    monkeypatch.setattr("wise.filters.fused._drjit.LIBRARY_FOLDERS", (str(tmp_path / "none"),))
+    assert find_libllvm() is None
+
+
+@pytest.mark.skipif(not llvm_backend(), reason="Dr.Jit's CPU backend does not start here")
+def test_the_engine_check_reports_the_library() -> None:
+    done = subprocess.run(
+        [sys.executable, "-m", "wise.filters.fused.llvm"], capture_output=True, text=True, timeout=120
+    )
+    assert done.returncode == 0
+    assert "(works)" in done.stdout
