@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import functools
+
 import torch
 
+from wise.filters import fused
 from wise.filters._checks import ParamLike, as_map, check_image
 from wise.filters.clamp import inward_clamp
 
@@ -23,6 +26,22 @@ _RGB_TO_XYZ = (
 _POW_FLOOR = 1e-8
 
 
+@functools.cache
+def _fused_constants():
+    from wise.filters.fused.color import Constants
+
+    inverse = torch.linalg.inv(torch.tensor(_RGB_TO_XYZ, dtype=torch.float64))
+    return Constants(
+        _SRGB_LINEAR_LIMIT,
+        _SRGB_ENCODED_LIMIT,
+        _D65_WHITE,
+        _LAB_EPSILON,
+        _LAB_KAPPA,
+        _RGB_TO_XYZ,
+        tuple(tuple(float(v) for v in row) for row in inverse),
+    )
+
+
 def _matrix(rows: tuple[tuple[float, ...], ...], ref: torch.Tensor) -> torch.Tensor:
     return torch.tensor(rows, dtype=ref.dtype, device=ref.device)
 
@@ -33,12 +52,20 @@ def _apply_matrix(image: torch.Tensor, matrix: torch.Tensor) -> torch.Tensor:
 
 def srgb_to_linear(image: torch.Tensor) -> torch.Tensor:
     """sRGB-encoded values in [0, 1] to linear light (IEC 61966-2-1)."""
+    if fused.drjit_enabled(image):
+        from wise.filters.fused import color
+
+        return color.srgb_to_linear(image, _fused_constants())
     high = ((image.clamp_min(_SRGB_LINEAR_LIMIT) + 0.055) / 1.055) ** 2.4
     return torch.where(image > _SRGB_LINEAR_LIMIT, high, image / 12.92)
 
 
 def linear_to_srgb(image: torch.Tensor) -> torch.Tensor:
     """Linear light to sRGB encoding (IEC 61966-2-1)."""
+    if fused.drjit_enabled(image):
+        from wise.filters.fused import color
+
+        return color.linear_to_srgb(image, _fused_constants())
     high = 1.055 * image.clamp_min(_SRGB_ENCODED_LIMIT) ** (1.0 / 2.4) - 0.055
     return torch.where(image > _SRGB_ENCODED_LIMIT, high, image * 12.92)
 
@@ -53,6 +80,10 @@ def rgb_to_lab(image: torch.Tensor) -> torch.Tensor:
         ``(B, 3, H, W)`` L*a*b* image.
     """
     check_image(image, channels=3)
+    if fused.drjit_enabled(image):
+        from wise.filters.fused import color
+
+        return color.rgb_to_lab(image, _fused_constants())
     xyz = _apply_matrix(srgb_to_linear(image), _matrix(_RGB_TO_XYZ, image))
     white = image.new_tensor(_D65_WHITE).view(1, 3, 1, 1)
     ratio = xyz / white
@@ -73,6 +104,10 @@ def lab_to_rgb(lab: torch.Tensor, clip: bool = True) -> torch.Tensor:
         clip: clamp the result to [0, 1] (colours outside the sRGB gamut).
     """
     check_image(lab, name="lab", channels=3)
+    if fused.drjit_enabled(lab):
+        from wise.filters.fused import color
+
+        return color.lab_to_rgb(lab, _fused_constants(), clip)
     lightness, a, b = lab.unbind(dim=1)
     fy = (lightness + 16.0) / 116.0
     f = torch.stack((fy + a / 500.0, fy, fy - b / 200.0), dim=1)

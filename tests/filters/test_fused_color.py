@@ -1,0 +1,53 @@
+"""The fused colour conversions (one Dr.Jit kernel per pass) against the PyTorch path."""
+
+import pytest
+import torch
+from torch.autograd import gradcheck
+
+from tests.filters.helpers import rand
+from tests.filters.paths import assert_paths_agree, kernels
+from wise.filters.color import lab_to_rgb, linear_to_srgb, rgb_to_lab, srgb_to_linear
+from wise.filters.fused._drjit import llvm_backend
+
+pytestmark = pytest.mark.skipif(not llvm_backend(), reason="Dr.Jit's CPU backend does not start here")
+
+
+def _lab(seed: int = 0) -> torch.Tensor:
+    g = torch.Generator().manual_seed(seed)
+    lab = torch.stack(
+        (
+            torch.rand(2, 9, 11, generator=g, dtype=torch.float64) * 100.0,
+            torch.rand(2, 9, 11, generator=g, dtype=torch.float64) * 160.0 - 80.0,
+            torch.rand(2, 9, 11, generator=g, dtype=torch.float64) * 160.0 - 80.0,
+        ),
+        dim=1,
+    )
+    return lab.requires_grad_()
+
+
+@pytest.mark.parametrize("dtype, rtol", [(torch.float64, 1e-9), (torch.float32, 2e-5)])
+def test_rgb_to_lab_matches_torch(dtype: torch.dtype, rtol: float) -> None:
+    image = rand(2, 3, 9, 11).detach().to(dtype).requires_grad_()
+    assert_paths_agree(rgb_to_lab, [image], rtol=rtol)
+
+
+@pytest.mark.parametrize("clip", [True, False])
+@pytest.mark.parametrize("dtype, rtol", [(torch.float64, 1e-9), (torch.float32, 2e-5)])
+def test_lab_to_rgb_matches_torch(clip: bool, dtype: torch.dtype, rtol: float) -> None:
+    lab = _lab().detach().to(dtype).requires_grad_()
+    assert_paths_agree(lambda x: lab_to_rgb(x, clip=clip), [lab], rtol=rtol)
+
+
+@pytest.mark.parametrize("function", [srgb_to_linear, linear_to_srgb])
+def test_the_transfer_functions_match_torch(function) -> None:
+    # both sides of the linear segment, one channel and four
+    assert_paths_agree(function, [rand(2, 4, 7, 5, low=-0.01, high=0.2)], rtol=1e-9)
+    assert_paths_agree(function, [rand(1, 1, 7, 5, seed=2)], rtol=1e-9)
+
+
+def test_round_trip_and_gradcheck_on_the_fused_path() -> None:
+    image = rand(1, 3, 5, 6, low=0.05, high=0.95)
+    with kernels("fused"):
+        back = lab_to_rgb(rgb_to_lab(image), clip=False)
+        assert torch.allclose(back, image, atol=1e-9)
+        assert gradcheck(lambda x: lab_to_rgb(rgb_to_lab(x), clip=False), (image,), eps=1e-6, atol=1e-6)
