@@ -47,6 +47,11 @@ def inward_gradients(enabled: bool = True) -> Iterator[None]:
         _INWARD_GRADIENTS.reset(token)
 
 
+def inward_gradients_active() -> bool:
+    """Whether :func:`inward_gradients` is in effect here."""
+    return _INWARD_GRADIENTS.get()
+
+
 def inward_clamp(image: torch.Tensor, low: float = 0.0, high: float = 1.0) -> torch.Tensor:
     """``image.clamp(low, high)``; within :func:`inward_gradients` its backward also passes the
     gradient of a value beyond the range when following it (a descent step) moves the value

@@ -8,7 +8,7 @@ import torch
 
 from wise.filters import fused
 from wise.filters._checks import ParamLike, as_map, check_image
-from wise.filters.clamp import inward_clamp
+from wise.filters.clamp import inward_clamp, inward_gradients_active
 
 # sRGB (IEC 61966-2-1) transfer function
 _SRGB_LINEAR_LIMIT = 0.04045
@@ -195,6 +195,10 @@ def adjust_color(
         ``(B, 3, H, W)`` RGB in [0, 1].
     """
     check_image(image, channels=3)
+    if fused.drjit_enabled(image) and not (torch.is_grad_enabled() and inward_gradients_active()):
+        return _fused_adjust_color(
+            image, brightness, contrast, saturation, gamma, exposure, hue_shift, temperature, tint
+        )
     out = (image + as_map(brightness, image, "brightness")) * as_map(exposure, image, "exposure")
     out = (out - 0.5) * as_map(contrast, image, "contrast") + 0.5
     if not (_is_number(temperature, 0.0) and _is_number(tint, 0.0)):
@@ -209,3 +213,28 @@ def adjust_color(
     if not _is_number(gamma, 1.0):
         out = out.clamp_min(_POW_FLOOR) ** (1.0 / as_map(gamma, image, "gamma").clamp_min(0.1))
     return inward_clamp(out)
+
+
+def _fused_adjust_color(
+    image: torch.Tensor,
+    brightness: ParamLike,
+    contrast: ParamLike,
+    saturation: ParamLike,
+    gamma: ParamLike,
+    exposure: ParamLike,
+    hue_shift: ParamLike,
+    temperature: ParamLike,
+    tint: ParamLike,
+) -> torch.Tensor:
+    """:func:`adjust_color` as one Dr.Jit kernel (its clamps plain: no inward gradients asked)."""
+    from wise.filters.fused import color
+
+    amounts = {"brightness": brightness, "exposure": exposure, "contrast": contrast}
+    white_balance = not (_is_number(temperature, 0.0) and _is_number(tint, 0.0))
+    if white_balance:
+        amounts.update(temperature=temperature, tint=tint)
+    for name, value, neutral in (("saturation", saturation, 1.0), ("hue_shift", hue_shift, 0.0), ("gamma", gamma, 1.0)):
+        if not _is_number(value, neutral):
+            amounts[name] = value
+    maps = {name: as_map(value, image, name) for name, value in amounts.items()}
+    return color.adjust_color(image, maps, white_balance)

@@ -25,6 +25,15 @@ def minimum(a, b):
     return dr.select(a < b, a, b)
 
 
+def clamp(value, low=None, high=None):
+    """``torch.clamp``: the gradient passes where ``low <= value <= high``, the bounds included."""
+    if low is not None:
+        value = dr.select(value < low, low, value)
+    if high is not None:
+        value = dr.select(value > high, high, value)
+    return value
+
+
 @dataclass
 class Corners:
     """A position's four bilinear neighbours (flat offsets within a channel), the fractions
