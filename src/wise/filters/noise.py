@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import torch
 
 from wise.errors import WiseError
+from wise.filters import fused
 from wise.filters._checks import check_image, resolution_scale
 
 _MASK_32 = 0xFFFFFFFF
@@ -179,8 +180,11 @@ def value_noise(
     _check_positive(cell_size, "cell_size")
     if octaves < 1:
         raise WiseError(f"octaves must be at least 1, got {octaves}")
-    ys, xs = _reference_positions(like, origin, scale)
     key = _layer_key(int(seed), 0)
+    if fused.drjit_enabled(like):
+        layer = _fused_layer((cell_size, cell_size), 0.0, key, octaves, persistence)
+        return _as_batch(_fused_noise(like, [layer], origin, scale), like)
+    ys, xs = _reference_positions(like, origin, scale)
     noise = _fbm(ys, xs, (cell_size, cell_size), 0.0, key, octaves, persistence, like.dtype)
     return _as_batch(noise, like)
 
@@ -239,6 +243,19 @@ def paper_texture(
     """
     check_image(like, name="like")
     _check_positive(grain, "grain")
+    if fused.drjit_enabled(like):
+        layers = [
+            _fused_layer(
+                (layer.cell_along * grain, layer.cell_across * grain),
+                layer.angle,
+                _layer_key(int(seed), index + 1),
+                layer.octaves,
+                PAPER_PERSISTENCE,
+                layer.weight,
+            )
+            for index, layer in enumerate(_PAPER_LAYERS)
+        ]
+        return _as_batch(_fused_noise(like, layers, origin, scale, contrast=_PAPER_CONTRAST), like)
     ys, xs = _reference_positions(like, origin, scale)
     total: torch.Tensor | None = None
     for index, layer in enumerate(_PAPER_LAYERS):
@@ -249,6 +266,25 @@ def paper_texture(
     assert total is not None
     height = ((total - 0.5) * _PAPER_CONTRAST + 0.5).clamp_(0.0, 1.0)
     return _as_batch(height, like)
+
+
+def _fused_layer(cells: tuple[float, float], angle: float, key: int, octaves: int, persistence: float, weight=1.0):
+    from wise.filters.fused.noise import Layer
+
+    keys = tuple(_layer_key(key, octave + 1) for octave in range(octaves))
+    return Layer(cells[0], cells[1], angle, keys, persistence, weight)
+
+
+def _fused_noise(like: torch.Tensor, layers: list, origin: tuple[int, int], scale: float | None, contrast=None):
+    """The Dr.Jit kernel of :func:`_fbm` (and the paper's mix of layers), ``(H, W)``."""
+    from wise.filters.fused.noise import Hash, mixed_noise
+
+    s = resolution_scale(like) if scale is None else float(scale)
+    if not s > 0.0:
+        raise WiseError(f"scale must be positive, got {s}")
+    constants = Hash(_MIX_A, _MIX_B, _VALUE_BITS, LACUNARITY, OCTAVE_TURN)
+    origin = (int(origin[0]), int(origin[1]))
+    return mixed_noise(like.shape[-2], like.shape[-1], like.dtype, layers, constants, origin, s, contrast)
 
 
 def _as_batch(texture: torch.Tensor, like: torch.Tensor) -> torch.Tensor:
