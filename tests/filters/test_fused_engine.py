@@ -68,3 +68,30 @@ def test_the_engine_check_reports_the_library() -> None:
     )
     assert done.returncode == 0
     assert "(works)" in done.stdout
+
+
+@pytest.mark.skipif(not llvm_backend(), reason="Dr.Jit's CPU backend does not start here")
+def test_a_new_picture_size_or_tile_origin_compiles_no_new_kernel() -> None:
+    import drjit as dr
+    import torch
+
+    from wise.filters.bilateral import bilateral_pass
+    from wise.filters.color import adjust_color, rgb_to_lab
+    from wise.filters.noise import paper_texture
+
+    def run(height: int, width: int, origin: tuple[int, int]) -> list[dict]:
+        image = torch.rand(1, 3, height, width)
+        direction = torch.zeros(1, 2, height, width)
+        direction[:, 1] = 1.0
+        dr.kernel_history()  # clears it
+        bilateral_pass(rgb_to_lab(adjust_color(image, brightness=0.1, saturation=1.2)), direction, 2.0, 4.0)
+        paper_texture(image, origin=origin, scale=0.9)
+        return [k for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT]
+
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        run(31, 40, (0, 0))
+        later = run(47, 29, (64, 128))
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    assert later and all(kernel["cache_hit"] for kernel in later)

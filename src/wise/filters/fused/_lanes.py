@@ -7,6 +7,11 @@ the sampling of ``grid_sample(mode="bilinear", padding_mode="border", align_corn
 
 Minima and maxima of floats are written as selections: LLVM 15 and older cannot compile the
 ``llvm.minimum`` intrinsic that Dr.Jit emits for them on x86.
+
+Sizes enter a kernel as opaque values (read at run time), not as constants of its code: Dr.Jit
+caches compiled kernels by their code, and a size written into it would compile every kernel
+again for each new picture size. :func:`runtime` does the same for any value that changes
+between calls.
 """
 
 from __future__ import annotations
@@ -14,7 +19,24 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import drjit as dr
-from drjit.llvm import UInt32
+from drjit.llvm import Float64, Int32, UInt32
+
+
+def runtime(array_type, value):
+    """``value`` as an opaque array of ``array_type``: the kernel reads it, so a new value does not
+    compile a new kernel."""
+    return dr.opaque(array_type, value)
+
+
+def divide(index, divisor: int):
+    """Quotient and remainder of lane indices by a run-time ``divisor``: a float64 reciprocal,
+    corrected by one where it rounded across a multiple (x86 has no vector integer division)."""
+    signed = Int32(index)
+    d = runtime(Int32, divisor)
+    quotient = Int32(Float64(signed) * runtime(Float64, 1.0 / divisor))
+    remainder = signed - quotient * d
+    quotient = dr.select(remainder < 0, quotient - 1, dr.select(remainder >= d, quotient + 1, quotient))
+    return UInt32(quotient), UInt32(signed - quotient * d)
 
 
 def maximum(a, b):
@@ -56,15 +78,18 @@ class Grid:
         self.batch, self.height, self.width = batch, height, width
         self.Float = float_type
         self.plane = height * width
+        self._width = runtime(UInt32, width)
+        self._plane = runtime(UInt32, self.plane)
+        self._last = (runtime(float_type, float(width - 1)), runtime(float_type, float(height - 1)))
         index = dr.arange(UInt32, batch * self.plane)
-        self.pixel = index % self.plane
-        self.picture = index // self.plane
-        self.x = float_type(self.pixel % width)
-        self.y = float_type(self.pixel // width)
+        self.picture, self.pixel = divide(index, self.plane) if batch > 1 else (UInt32(0), index)
+        row, column = divide(self.pixel, width)
+        self.x = float_type(column)
+        self.y = float_type(row)
 
     def channel_start(self, channel: int, channels: int):
         """Flat offset of the lane's picture's ``channel`` in a ``(B, channels, H, W)`` array."""
-        return (self.picture * channels + channel) * self.plane
+        return (self.picture * channels + channel) * self._plane
 
     def load(self, array, channel: int = 0, channels: int = 1):
         """The lane's own pixel of ``channel`` of a flat ``(B, channels, H, W)`` array."""
@@ -83,14 +108,14 @@ class Grid:
 
     def locate(self, x, y) -> Corners:
         """The bilinear neighbours of the position ``(x, y)`` in pixels, clamped to the picture."""
-        fx, x0, x1, moves_x = self._axis(x, self.width)
-        fy, y0, y1, moves_y = self._axis(y, self.height)
-        top, bottom = y0 * self.width, y1 * self.width
+        fx, x0, x1, moves_x = self._axis(x, self._last[0])
+        fy, y0, y1, moves_y = self._axis(y, self._last[1])
+        top, bottom = y0 * self._width, y1 * self._width
         return Corners(top + x0, top + x1, bottom + x0, bottom + x1, fx, fy, moves_x, moves_y)
 
-    def _axis(self, position, size: int):
-        moves = (position > 0) & (position < size - 1)
-        clamped = minimum(maximum(position, 0.0), float(size - 1))
+    def _axis(self, position, last):
+        moves = (position > 0) & (position < last)
+        clamped = minimum(maximum(position, 0.0), last)
         lower = UInt32(clamped)  # truncation is the floor of a non-negative position
         upper = dr.select(moves, lower + 1, lower)
         return clamped - self.Float(lower), lower, upper, moves

@@ -18,7 +18,7 @@ import torch
 from drjit.llvm import Float64, Int32, UInt32
 
 from wise.filters.fused._drjit import float_type, kernel_threads
-from wise.filters.fused._lanes import clamp
+from wise.filters.fused._lanes import clamp, divide, runtime
 
 
 @dataclass(frozen=True)
@@ -66,8 +66,10 @@ def _lattice(u, v, key: int, Float, constants: Hash):
     unit = 2.0**-constants.value_bits
     shift = 32 - constants.value_bits
 
+    key = runtime(UInt32, key)
+
     def value(column, row):
-        h = _mix(_mix(UInt32(key) ^ column, constants) ^ row, constants)
+        h = _mix(_mix(key ^ column, constants) ^ row, constants)
         return Float(h >> shift) * unit
 
     upper = dr.lerp(value(left, top), value(left + 1, top), fade_u)
@@ -81,11 +83,12 @@ def _fbm(x, y, layer: Layer, Float, constants: Hash):
         shrink = constants.lacunarity**octave
         turn = layer.angle + octave * constants.octave_turn
         if turn == 0.0:
-            u, v = x * (shrink / layer.cell_along), y * (shrink / layer.cell_across)
+            u, v = x * runtime(Float64, shrink / layer.cell_along), y * runtime(Float64, shrink / layer.cell_across)
         else:
             cos, sin = math.cos(turn), math.sin(turn)
-            u = x * (cos * shrink / layer.cell_along) + y * (sin * shrink / layer.cell_along)
-            v = y * (cos * shrink / layer.cell_across) - x * (sin * shrink / layer.cell_across)
+            along, across = shrink / layer.cell_along, shrink / layer.cell_across
+            u = x * runtime(Float64, cos * along) + y * runtime(Float64, sin * along)
+            v = y * runtime(Float64, cos * across) - x * runtime(Float64, sin * across)
         noise = _lattice(u, v, key, Float, constants) * weight
         total = noise if total is None else total + noise
         weights += weight
@@ -108,12 +111,12 @@ def mixed_noise(
     clamped to [0, 1]."""
     Float = float_type(dtype)
     with kernel_threads():
-        index = dr.arange(UInt32, height * width)
-        x = (Float64(index % width) + (origin[1] + 0.5)) / scale
-        y = (Float64(index // width) + (origin[0] + 0.5)) / scale
+        row, column = divide(dr.arange(UInt32, height * width), width)
+        x = (Float64(column) + runtime(Float64, origin[1] + 0.5)) / runtime(Float64, scale)
+        y = (Float64(row) + runtime(Float64, origin[0] + 0.5)) / runtime(Float64, scale)
         total = None
         for layer in layers:
-            noise = _fbm(x, y, layer, Float, constants) * layer.weight
+            noise = _fbm(x, y, layer, Float, constants) * runtime(Float, layer.weight)
             total = noise if total is None else total + noise
         if contrast is not None:
             total = clamp((total - 0.5) * contrast + 0.5, 0.0, 1.0)
