@@ -136,12 +136,18 @@ def map_array(tensor: torch.Tensor, array_type, batch: int) -> tuple[object, boo
 def as_tensor(array, shape: tuple[int, ...]) -> torch.Tensor:
     """An evaluated flat array as a tensor of ``shape``. Kernels write into Dr.Jit's own arrays
     (``drjit.zeros``), not into tensors' memory: a scatter may move its target to a new buffer."""
+    import drjit
+
+    drjit.sync_thread()  # kernels run asynchronously
     return array.torch().view(shape)
 
 
 def to_torch(arrays, shape: tuple[int, ...]) -> torch.Tensor:
     """Evaluated flat arrays of one picture channel each (``shape`` without the channel) stacked
     on dimension 1: ``(B, len(arrays), H, W)``."""
+    import drjit
+
+    drjit.sync_thread()  # kernels run asynchronously
     return torch.stack([a.torch().view(shape) for a in arrays], dim=1)
 
 

@@ -19,6 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import drjit as dr
+import torch
 from drjit.llvm import Float64, Int32, UInt32
 
 
@@ -26,6 +27,11 @@ def runtime(array_type, value):
     """``value`` as an opaque array of ``array_type``: the kernel reads it, so a new value does not
     compile a new kernel."""
     return dr.opaque(array_type, value)
+
+
+def empty_output(grid: "Grid", channels: int):
+    """A flat ``(B, channels, H, W)`` array for :meth:`Grid.store` to fill."""
+    return dr.empty(grid.Float, grid.batch * channels * grid.plane)
 
 
 def divide(index, divisor: int):
@@ -101,10 +107,10 @@ class Grid:
         return self.load(array) if per_pixel else dr.gather(self.Float, array, self.picture)
 
     def store(self, target, value, channel: int = 0, channels: int = 1) -> None:
-        """Write ``value`` to the lane's own pixel of ``channel`` of a flat zero-filled output
-        (an addition, which lets the writes of several channels share one kernel)."""
+        """Write ``value`` to the lane's own pixel of ``channel`` of a flat output: each element
+        once, so the writes of all channels share one kernel (see :func:`empty_output`)."""
         index = self.channel_start(channel, channels) + self.pixel
-        dr.scatter_add(target, value, index, mode=dr.ReduceMode.Direct)
+        dr.scatter(target, value, index, mode=dr.ReduceMode.Permute)
 
     def locate(self, x, y) -> Corners:
         """The bilinear neighbours of the position ``(x, y)`` in pixels, clamped to the picture."""
@@ -156,3 +162,48 @@ class Grid:
         dr.scatter_add(target, top * corners.fx, start + corners.top_right, mode=mode)
         dr.scatter_add(target, bottom * (1.0 - corners.fx), start + corners.bottom_left, mode=mode)
         dr.scatter_add(target, bottom * corners.fx, start + corners.bottom_right, mode=mode)
+
+
+PACKET = 4
+"""Channels added by one scatter of :class:`PackedGradient`."""
+
+
+class PackedGradient:
+    """An image's gradient kept as ``(B, H, W, G * 4)``: a pixel's channels side by side in ``G``
+    groups of four (the last padded with zeros), added to with one four-wide scatter per group.
+    One scatter per channel costs many times more: each is a reduction of its own over the lanes."""
+
+    def __init__(self, grid: Grid, channels: int) -> None:
+        import drjit.llvm as backend
+
+        self.grid, self.channels = grid, channels
+        self.groups = -(-channels // PACKET)
+        self.Packet = backend.Array4f64 if grid.Float is backend.Float64 else backend.Array4f
+        self.array = dr.zeros(grid.Float, grid.batch * grid.plane * self.groups * PACKET)
+
+    def add(self, values: list, pixel) -> None:
+        """Add the channels' ``values`` at ``pixel`` (an offset within the lane's picture), into
+        per-thread copies summed at the end (no atomics contend)."""
+        padded = list(values) + [0.0] * (self.groups * PACKET - self.channels)
+        start = (self.grid.picture * self.grid._plane + pixel) * self.groups
+        for group in range(self.groups):
+            packet = self.Packet(*padded[group * PACKET : (group + 1) * PACKET])
+            dr.scatter_add(self.array, packet, start + group, mode=dr.ReduceMode.Expand)
+
+    def scatter(self, values: list, corners: Corners) -> None:
+        """Add the channels' ``values`` to the four corners with the bilinear weights: the adjoint
+        of :meth:`Grid.sample`."""
+        top, bottom = 1.0 - corners.fy, corners.fy
+        for weight, pixel in (
+            (top * (1.0 - corners.fx), corners.top_left),
+            (top * corners.fx, corners.top_right),
+            (bottom * (1.0 - corners.fx), corners.bottom_left),
+            (bottom * corners.fx, corners.bottom_right),
+        ):
+            self.add([v * weight for v in values], pixel)
+
+    def torch(self, shape: tuple[int, int, int, int]) -> torch.Tensor:
+        """The evaluated gradient as a ``(B, C, H, W)`` tensor."""
+        b, c, h, w = shape
+        dr.sync_thread()
+        return self.array.torch().view(b, h, w, -1)[..., :c].permute(0, 3, 1, 2)

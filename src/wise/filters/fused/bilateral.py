@@ -30,7 +30,7 @@ import torch
 
 from wise.filters.fused import reduce_to
 from wise.filters.fused._drjit import as_tensor, flat, float_type, kernel_threads, map_array
-from wise.filters.fused._lanes import Grid, maximum
+from wise.filters.fused._lanes import Grid, PackedGradient, empty_output, maximum
 
 _MIN_PAIR_WEIGHT = 1e-30
 """Floor of ``w_near + w_far`` as on the PyTorch path: both may underflow far out in a narrow Gaussian."""
@@ -161,14 +161,16 @@ def _backward(inputs: _Inputs, samples: int, support: float, g_output, output, n
             g_per_difference = 2.0 * g_log_range * inputs.r
             moves_x = dr.select(corners.moves_x, Float(sign), 0.0)
             moves_y = dr.select(corners.moves_y, Float(sign), 0.0)
+            g_values = []
             for k, ((_, slope_x, slope_y), difference, g) in enumerate(zip(sampled, differences, g_total)):
                 through_range = g_per_difference * difference
                 g_value = dr.fma(g, weight, through_range)
+                g_values.append(g_value)
                 g_centre[k] = g_centre[k] - through_range  # not in place: the list shares g_total's arrays
                 g_offset_x = dr.fma(moves_x * g_value, slope_x, g_offset_x)
                 g_offset_y = dr.fma(moves_y * g_value, slope_y, g_offset_y)
-                if g_image is not None:
-                    grid.scatter(g_image, g_value, corners, starts[k])
+            if g_image is not None:
+                g_image.scatter(g_values, corners)
         # the chain rule through the geometry both sides share: d_j(near, far), near and far of s and a
         g_ux = dr.fma(g_offset_x, pair.distance, g_ux)
         g_uy = dr.fma(g_offset_y, pair.distance, g_uy)
@@ -189,9 +191,8 @@ def _backward(inputs: _Inputs, samples: int, support: float, g_output, output, n
     grid.store(g_maps, g_a / (inputs.spatial * inputs.spatial * inputs.spatial), 2, 4)  # a = -1 / (2 sigma^2)
     grid.store(g_maps, g_r, 3, 4)
     if g_image is not None:
-        for k, g in enumerate(g_centre):
-            dr.scatter_add(g_image, g, starts[k] + grid.pixel, mode=dr.ReduceMode.Expand)
-        dr.eval(g_maps, g_image)
+        g_image.add(g_centre, grid.pixel)
+        dr.eval(g_maps, g_image.array)
     else:
         dr.eval(g_maps)
 
@@ -207,8 +208,7 @@ class BilateralPass(torch.autograd.Function):
         b, c, h, w = image.shape
         with kernel_threads():
             inputs = _Inputs.of(image, direction, spatial, neg_inv_two_range_sq)
-            Float = inputs.grid.Float
-            output_array, norm_array = dr.zeros(Float, b * c * h * w), dr.zeros(Float, b * h * w)
+            output_array, norm_array = empty_output(inputs.grid, c), empty_output(inputs.grid, 1)
             _forward(inputs, n, support, output_array, norm_array)
             output, norm = as_tensor(output_array, (b, c, h, w)), as_tensor(norm_array, (b, 1, h, w))
         ctx.save_for_backward(image, direction, spatial, neg_inv_two_range_sq, output, norm)
@@ -223,9 +223,8 @@ class BilateralPass(torch.autograd.Function):
         with kernel_threads():
             inputs = _Inputs.of(image, direction, spatial, neg_r)
             Float = inputs.grid.Float
-            # Dr.Jit's own array: the per-thread copies of a scatter are summed into a new buffer
-            g_image_array = dr.zeros(Float, b * c * h * w) if need[0] else None
-            g_maps_array = dr.zeros(Float, b * 4 * h * w)
+            g_image_packed = PackedGradient(inputs.grid, c) if need[0] else None
+            g_maps_array = empty_output(inputs.grid, 4)
             _backward(
                 inputs,
                 ctx.n,
@@ -233,10 +232,10 @@ class BilateralPass(torch.autograd.Function):
                 flat(grad_output, Float, (b, c, h, w)),
                 flat(output, Float),
                 flat(norm, Float),
-                g_image_array,
+                g_image_packed,
                 g_maps_array,
             )
-            g_image = as_tensor(g_image_array, (b, c, h, w)) if need[0] else None
+            g_image = g_image_packed.torch((b, c, h, w)) if need[0] else None
             g_maps = as_tensor(g_maps_array, (b, 4, h, w))
         return (
             g_image,
