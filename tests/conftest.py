@@ -2,7 +2,6 @@ import os
 import signal
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 import torch
@@ -11,23 +10,18 @@ from skimage import data
 
 from wise.filters import fused
 
-COMPILED_KERNELS = 50
-"""Compiled kernels (float32 and float64) in the package's cache when every effect has run."""
-
 
 def pytest_sessionstart(session: pytest.Session) -> None:
-    """With a cold cache (a fresh clone), the fused kernels are compiled for both dtypes before
-    the tests, the two at once: that halves the compile time, and no timed test waits for a
-    compilation."""
+    """With a cold kernel cache (a fresh clone), the fused kernels are compiled before the tests,
+    so that no timed test waits for a compilation."""
     if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
         # started in the background by a shell without job control: the Ctrl-C tests need it back
         signal.signal(signal.SIGINT, signal.default_int_handler)
-    if fused.requested() != "fused" or not fused.numba_available():
+    if fused.requested() != "fused":
         return
     if os.environ.get("PYTEST_XDIST_WORKER"):  # the controller compiled before it started the workers
         return
-    cache = Path(fused.__file__).parent / "__pycache__"
-    if len(list(cache.glob("*.nbc"))) < COMPILED_KERNELS:
+    if not fused.warm_marker().exists():
         subprocess.run([sys.executable, "-m", "wise.effects.compile", "float32", "float64"], check=True)
 
 

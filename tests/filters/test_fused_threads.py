@@ -1,35 +1,46 @@
-"""The fused kernels leave PyTorch's thread count as the caller set it, and Ctrl-C for after them."""
+"""The fused kernels run on PyTorch's thread count, leave it as it was, and serve several threads."""
 
-import os
-import signal
-import time
+from concurrent.futures import ThreadPoolExecutor
 
 import pytest
 import torch
 
 from tests.filters.paths import kernels
-from wise.filters.fused import kernel_threads
+from wise.filters.bilateral import bilateral_pass
+from wise.filters.fused._drjit import llvm_backend
 from wise.filters.gaussian import gaussian_blur
+
+pytestmark = pytest.mark.skipif(not llvm_backend(), reason="Dr.Jit's CPU backend does not start here")
 
 
 @pytest.mark.parametrize("threads", [1, 2])
-def test_a_kernel_leaves_pytorchs_thread_count_as_it_was(threads: int) -> None:
+def test_a_kernel_runs_on_pytorchs_thread_count_and_leaves_it(threads: int) -> None:
+    import drjit as dr
+
     before = torch.get_num_threads()
     torch.set_num_threads(threads)
     try:
         with kernels("fused"):
             gaussian_blur(torch.rand(1, 1, 16, 16), 1.0, scale=1.0)
         assert torch.get_num_threads() == threads
+        assert dr.thread_count() == threads
     finally:
         torch.set_num_threads(before)
 
 
-def test_ctrl_c_during_a_kernel_is_delivered_when_it_returns() -> None:
-    reached_end = False
-    with pytest.raises(KeyboardInterrupt):
-        with kernel_threads():
-            os.kill(os.getpid(), signal.SIGINT)  # as if it landed in a callback of the compiler
-            time.sleep(0.05)
-            reached_end = True
-    assert reached_end
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+def test_threads_rendering_at_once_get_their_own_results() -> None:
+    # the editor's server renders in threads: kernels are traced and run one at a time
+    generator = torch.Generator().manual_seed(0)
+    images = [torch.rand(1, 3, 40 + 8 * k, 48, generator=generator) for k in range(6)]
+
+    def render(image: torch.Tensor) -> torch.Tensor:
+        direction = torch.zeros(1, 2, *image.shape[-2:])
+        direction[:, 0] = 1.0
+        return bilateral_pass(gaussian_blur(image, 1.5, scale=1.0), direction, 2.0, 0.3, scale=1.0)
+
+    with kernels("fused"):
+        alone = [render(image) for image in images]
+        with ThreadPoolExecutor(max_workers=3) as pool:
+            together = list(pool.map(render, images * 3))
+    for k, result in enumerate(together):
+        assert torch.equal(result, alone[k % len(images)])

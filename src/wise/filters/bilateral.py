@@ -145,7 +145,7 @@ def bilateral_pass(
     neg_inv_two_range_sq = -0.5 / as_map(sigma_r, image, "sigma_r").clamp_min(MIN_SIGMA).square()
     n = min(samples, _merged_samples_needed(max_value(spatial)))
     direction = direction.expand(image.shape[0], -1, -1, -1)
-    if fused.drjit_enabled(image, direction, spatial, neg_inv_two_range_sq):
+    if fused.enabled(image, direction, spatial, neg_inv_two_range_sq):
         from wise.filters.fused.bilateral import BilateralPass
 
         return BilateralPass.apply(image, direction, spatial, neg_inv_two_range_sq, n, SUPPORT)

@@ -52,7 +52,7 @@ def _apply_matrix(image: torch.Tensor, matrix: torch.Tensor) -> torch.Tensor:
 
 def srgb_to_linear(image: torch.Tensor) -> torch.Tensor:
     """sRGB-encoded values in [0, 1] to linear light (IEC 61966-2-1)."""
-    if fused.drjit_enabled(image):
+    if fused.enabled(image):
         from wise.filters.fused import color
 
         return color.srgb_to_linear(image, _fused_constants())
@@ -62,7 +62,7 @@ def srgb_to_linear(image: torch.Tensor) -> torch.Tensor:
 
 def linear_to_srgb(image: torch.Tensor) -> torch.Tensor:
     """Linear light to sRGB encoding (IEC 61966-2-1)."""
-    if fused.drjit_enabled(image):
+    if fused.enabled(image):
         from wise.filters.fused import color
 
         return color.linear_to_srgb(image, _fused_constants())
@@ -80,7 +80,7 @@ def rgb_to_lab(image: torch.Tensor) -> torch.Tensor:
         ``(B, 3, H, W)`` L*a*b* image.
     """
     check_image(image, channels=3)
-    if fused.drjit_enabled(image):
+    if fused.enabled(image):
         from wise.filters.fused import color
 
         return color.rgb_to_lab(image, _fused_constants())
@@ -104,7 +104,7 @@ def lab_to_rgb(lab: torch.Tensor, clip: bool = True) -> torch.Tensor:
         clip: clamp the result to [0, 1] (colours outside the sRGB gamut).
     """
     check_image(lab, name="lab", channels=3)
-    if fused.drjit_enabled(lab):
+    if fused.enabled(lab):
         from wise.filters.fused import color
 
         return color.lab_to_rgb(lab, _fused_constants(), clip)
@@ -195,7 +195,7 @@ def adjust_color(
         ``(B, 3, H, W)`` RGB in [0, 1].
     """
     check_image(image, channels=3)
-    if fused.drjit_enabled(image) and not (torch.is_grad_enabled() and inward_gradients_active()):
+    if fused.enabled(image) and not (torch.is_grad_enabled() and inward_gradients_active()):
         return _fused_adjust_color(
             image, brightness, contrast, saturation, gamma, exposure, hue_shift, temperature, tint
         )

@@ -181,7 +181,7 @@ def value_noise(
     if octaves < 1:
         raise WiseError(f"octaves must be at least 1, got {octaves}")
     key = _layer_key(int(seed), 0)
-    if fused.drjit_enabled(like):
+    if fused.enabled(like):
         layer = _fused_layer((cell_size, cell_size), 0.0, key, octaves, persistence)
         return _as_batch(_fused_noise(like, [layer], origin, scale), like)
     ys, xs = _reference_positions(like, origin, scale)
@@ -243,7 +243,7 @@ def paper_texture(
     """
     check_image(like, name="like")
     _check_positive(grain, "grain")
-    if fused.drjit_enabled(like):
+    if fused.enabled(like):
         layers = [
             _fused_layer(
                 (layer.cell_along * grain, layer.cell_across * grain),

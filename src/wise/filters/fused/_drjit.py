@@ -125,14 +125,6 @@ def flat(tensor: torch.Tensor, array_type, shape: torch.Size | tuple[int, ...] |
     return array_type(value.contiguous().reshape(-1))
 
 
-def map_array(tensor: torch.Tensor, array_type, batch: int) -> tuple[object, bool]:
-    """A ``(B, 1, H, W)`` or ``(B, 1, 1, 1)`` map (a batch of 1 broadcasts) as a flat array, and
-    whether it holds a value per pixel (see :meth:`wise.filters.fused._lanes.Grid.load_map`)."""
-    per_pixel = tensor.shape[-1] * tensor.shape[-2] > 1
-    shape = (batch, 1, *tensor.shape[-2:])
-    return flat(tensor, array_type, shape), per_pixel
-
-
 def as_tensor(array, shape: tuple[int, ...]) -> torch.Tensor:
     """An evaluated flat array as a tensor of ``shape``. Kernels write into Dr.Jit's own arrays
     (``drjit.zeros``), not into tensors' memory: a scatter may move its target to a new buffer."""

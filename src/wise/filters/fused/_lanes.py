@@ -83,28 +83,47 @@ class Grid:
     def __init__(self, batch: int, height: int, width: int, float_type) -> None:
         self.batch, self.height, self.width = batch, height, width
         self.Float = float_type
+        self.dtype = torch.float64 if float_type is Float64 else torch.float32
         self.plane = height * width
-        self._width = runtime(UInt32, width)
-        self._plane = runtime(UInt32, self.plane)
+        self.lanes = batch * self.plane
+        # the sizes as the kernel reads them, for index arithmetic (the ints above size arrays)
+        self.runtime_width = runtime(UInt32, width)
+        self.runtime_height = runtime(UInt32, height)
+        self.runtime_plane = runtime(UInt32, self.plane)
         self._last = (runtime(float_type, float(width - 1)), runtime(float_type, float(height - 1)))
-        index = dr.arange(UInt32, batch * self.plane)
-        self.picture, self.pixel = divide(index, self.plane) if batch > 1 else (UInt32(0), index)
-        row, column = divide(self.pixel, width)
-        self.x = float_type(column)
-        self.y = float_type(row)
+        self.lane = dr.arange(UInt32, self.lanes)
+        self.picture, self.pixel = divide(self.lane, self.plane) if batch > 1 else (UInt32(0), self.lane)
+        self.row, self.column = divide(self.pixel, width)
+        self.x = float_type(self.column)
+        self.y = float_type(self.row)
 
     def channel_start(self, channel: int, channels: int):
         """Flat offset of the lane's picture's ``channel`` in a ``(B, channels, H, W)`` array."""
-        return (self.picture * channels + channel) * self._plane
+        return (self.picture * channels + channel) * self.runtime_plane
 
     def load(self, array, channel: int = 0, channels: int = 1):
         """The lane's own pixel of ``channel`` of a flat ``(B, channels, H, W)`` array."""
         return dr.gather(self.Float, array, self.channel_start(channel, channels) + self.pixel)
 
-    def load_map(self, array, per_pixel: bool):
-        """The lane's value of a flat map: ``(B, 1, H, W)`` where ``per_pixel``, else one value per
-        picture ``(B, 1, 1, 1)`` (never expanded to the picture's size)."""
-        return self.load(array) if per_pixel else dr.gather(self.Float, array, self.picture)
+    def load_broadcast(self, tensor: torch.Tensor):
+        """The lane's value of a map broadcasting to ``(B, 1, H, W)``: one value per picture
+        ``(B, 1, 1, 1)``, a map shared by the batch ``(1, 1, H, W)``, a single value, ... read from
+        the map's own values, never from a copy expanded to the picture's size (a dimension
+        expanded with stride 0 counts as 1)."""
+        value = tensor.detach()
+        for dim in range(value.dim()):
+            if value.stride(dim) == 0 and value.shape[dim] > 1:
+                value = value.narrow(dim, 0, 1)
+        batch, _, height, width = value.shape
+        array = self.Float(value.to(self.dtype).contiguous().view(-1))
+        if batch == height == width == 1:
+            return array  # a single value: Dr.Jit broadcasts it over the lanes
+        index = self.picture if batch > 1 else UInt32(0)
+        if height > 1:
+            index = index * self.runtime_height + self.row
+        if width > 1:
+            index = index * self.runtime_width + self.column
+        return dr.gather(self.Float, array, index)
 
     def store(self, target, value, channel: int = 0, channels: int = 1) -> None:
         """Write ``value`` to the lane's own pixel of ``channel`` of a flat output: each element
@@ -116,7 +135,7 @@ class Grid:
         """The bilinear neighbours of the position ``(x, y)`` in pixels, clamped to the picture."""
         fx, x0, x1, moves_x = self._axis(x, self._last[0])
         fy, y0, y1, moves_y = self._axis(y, self._last[1])
-        top, bottom = y0 * self._width, y1 * self._width
+        top, bottom = y0 * self.runtime_width, y1 * self.runtime_width
         return Corners(top + x0, top + x1, bottom + x0, bottom + x1, fx, fy, moves_x, moves_y)
 
     def _axis(self, position, last):
@@ -185,7 +204,7 @@ class PackedGradient:
         """Add the channels' ``values`` at ``pixel`` (an offset within the lane's picture), into
         per-thread copies summed at the end (no atomics contend)."""
         padded = list(values) + [0.0] * (self.groups * PACKET - self.channels)
-        start = (self.grid.picture * self.grid._plane + pixel) * self.groups
+        start = (self.grid.picture * self.grid.runtime_plane + pixel) * self.groups
         for group in range(self.groups):
             packet = self.Packet(*padded[group * PACKET : (group + 1) * PACKET])
             dr.scatter_add(self.array, packet, start + group, mode=dr.ReduceMode.Expand)

@@ -29,7 +29,7 @@ import drjit as dr
 import torch
 
 from wise.filters.fused import reduce_to
-from wise.filters.fused._drjit import as_tensor, flat, float_type, kernel_threads, map_array
+from wise.filters.fused._drjit import as_tensor, flat, float_type, kernel_threads
 from wise.filters.fused._lanes import Grid, PackedGradient, empty_output, maximum
 
 _MIN_PAIR_WEIGHT = 1e-30
@@ -65,7 +65,7 @@ class _Inputs:
         pixels = flat(image, Float)
         directions = flat(direction, Float, (b, 2, h, w))
         ux, uy = grid.load(directions, 0, 2), grid.load(directions, 1, 2)
-        sigma = grid.load_map(*map_array(spatial, Float, b))
+        sigma = grid.load_broadcast(spatial)
         return cls(
             grid,
             pixels,
@@ -76,7 +76,7 @@ class _Inputs:
             1.0 / maximum(maximum(dr.abs(ux), dr.abs(uy)), _MIN_DIRECTION),
             sigma,
             -0.5 / (sigma * sigma),
-            grid.load_map(*map_array(neg_r, Float, b)),
+            grid.load_broadcast(neg_r),
         )
 
 

@@ -1,93 +1,102 @@
-"""Fused CPU kernel of :class:`wise.filters.gaussian._FixedBlurAxis`: one axis of a fixed,
-symmetric Gaussian with replicated borders, and its adjoint for backward.
+"""Fused kernels of :class:`wise.filters.gaussian._FixedBlurAxis` and
+:func:`wise.filters.gaussian._blur_axis_varying`: one axis of a Gaussian with replicated
+borders, forward and adjoint, in Dr.Jit.
 
-PyTorch's depthwise ``conv2d`` with a 1-D kernel runs at a few hundred megapixels per second
-on the CPU; this loop runs at memory speed.
+- Fixed: ``out_n = sum_k w_k v_clamp(n + k - r)`` with a symmetric kernel ``w`` of ``2r + 1``
+  taps; its adjoint is the same correlation of the gradient with zeros beyond the line, plus,
+  at the first and last pixel of a line, the gradient that fell on the replicated border.
+- Varying: ``out_n = sum_k w_k v_clamp(n + k) / sum_k w_k`` with ``w_k = exp(-k^2 / (2 sigma_n^2))``
+  for ``|k| <= 1`` or ``|k| <= support * sigma_n`` (and ``|k| <= radius``), the weights taken by
+  the recurrence ``w_k = w_(k-1) * w_1 * (w_1^2)^(k-1)``; backward scatters the image's gradient
+  along the line and gives ``g_sigma = sum_c g_c / (N sigma^3) * sum_k k^2 w_k (v_(n+k) - out)``.
+
+One SIMD lane per pixel; a line is a row (axis 3) or a column (axis 2) read with its stride.
+Arithmetic is in the image's dtype.
 """
 
 from __future__ import annotations
 
-import numpy as np
+import drjit as dr
 import torch
-from numba import njit, prange
+from drjit.llvm import Int32, UInt32
 
-from wise.filters.fused import FASTMATH, array, kernel_threads, reduce_to
-
-_COLUMN_BLOCK = 64
-"""Columns per task of the vertical pass: the inner loop runs along a row (vectorised) and
-the tasks split the image into independent column bands."""
+from wise.filters.fused import reduce_to
+from wise.filters.fused._drjit import as_tensor, flat, float_type, kernel_threads, to_torch
+from wise.filters.fused._lanes import Grid, runtime
 
 
-@njit(parallel=True, cache=True, fastmath=FASTMATH)
-def _correlate_rows(image, kernel, out):
-    planes, height, width = image.shape
-    taps = kernel.shape[0]
-    radius = (taps - 1) // 2
-    for task in prange(planes * height):
-        plane, y = task // height, task % height
-        row = image[plane, y]
-        for x in range(width):
-            total = row[0] * 0.0
-            if radius <= x < width - radius:
-                for k in range(taps):
-                    total += kernel[k] * row[x + k - radius]
-            else:
-                for k in range(taps):
-                    total += kernel[k] * row[min(max(x + k - radius, 0), width - 1)]
-            out[plane, y, x] = total
+class _Line:
+    """Where a lane lies on its line along ``axis`` (3: x, 2: y): its position, the line's
+    length and stride, and the flat offset of the line's first pixel."""
+
+    def __init__(self, grid: Grid, axis: int) -> None:
+        row, column = grid.row, grid.column
+        along = column if axis == 3 else row
+        self.size = runtime(Int32, grid.width if axis == 3 else grid.height)
+        self.stride = 1 if axis == 3 else grid.runtime_width
+        self.position = Int32(along)
+        self.start = grid.picture * grid.runtime_plane + grid.pixel - along * self.stride
+
+    def index(self, position):
+        """The flat offset of ``position`` (Int32, within the line) in a one-channel array."""
+        return self.start + UInt32(position) * self.stride
+
+    def clamped(self, offset):
+        """The flat offset of the pixel ``offset`` away along the line, clamped to the line."""
+        return self.index(dr.clip(self.position + offset, 0, self.size - 1))
 
 
-@njit(parallel=True, cache=True, fastmath=FASTMATH)
-def _correlate_rows_adjoint(grad, kernel, out):
-    planes, height, width = grad.shape
-    taps = kernel.shape[0]
-    radius = (taps - 1) // 2
-    for task in prange(planes * height):
-        plane, y = task // height, task % height
-        row = grad[plane, y]
-        target = out[plane, y]
-        target[:] = 0.0
-        for x in range(width):
-            for k in range(taps):
-                target[min(max(x + k - radius, 0), width - 1)] += kernel[k] * row[x]
+def _correlate(image, taps, radius, line: _Line, Float):
+    """``sum_k taps[k] image[p + k - radius]`` along the line, borders replicated: a loop over the
+    taps, whose count and weights the kernel reads (one kernel serves every sigma and size)."""
+
+    def add_tap(k, total):
+        weight = dr.gather(Float, taps, UInt32(k))
+        return k + 1, dr.fma(weight, dr.gather(Float, image, line.clamped(k - radius)), total)
+
+    _, total = dr.while_loop((Int32(0), Float(0.0)), lambda k, total: k <= 2 * radius, add_tap)
+    return total
 
 
-@njit(parallel=True, cache=True, fastmath=FASTMATH)
-def _correlate_columns(image, kernel, out, adjoint):
-    planes, height, width = image.shape
-    taps = kernel.shape[0]
-    radius = (taps - 1) // 2
-    blocks = (width + _COLUMN_BLOCK - 1) // _COLUMN_BLOCK
-    for task in prange(planes * blocks):
-        plane, block = task // blocks, task % blocks
-        start = block * _COLUMN_BLOCK
-        stop = min(start + _COLUMN_BLOCK, width)
-        out[plane, :, start:stop] = 0.0
-        for y in range(height):
-            for k in range(taps):
-                other = min(max(y + k - radius, 0), height - 1)
-                weight = kernel[k]
-                if adjoint:  # scatter row y to the rows it was read from
-                    for x in range(start, stop):
-                        out[plane, other, x] += weight * image[plane, y, x]
-                else:
-                    for x in range(start, stop):
-                        out[plane, y, x] += weight * image[plane, other, x]
+def _correlate_adjoint(grad, taps, border, radius, line: _Line, Float):
+    at_border = (line.position == 0) | (line.position == line.size - 1)
+
+    def add_tap(k, total):
+        other = line.position + (k - radius)
+        inside = (other >= 0) & (other < line.size)
+        value = dr.gather(Float, grad, line.index(dr.select(inside, other, 0)), active=inside)
+        weight = dr.select(at_border, dr.gather(Float, border, UInt32(k)), dr.gather(Float, taps, UInt32(k)))
+        return k + 1, dr.fma(weight, value, total)
+
+    _, total = dr.while_loop((Int32(0), Float(0.0)), lambda k, total: k <= 2 * radius, add_tap)
+    return total
 
 
 def correlate_axis(image: torch.Tensor, kernel: torch.Tensor, axis: int, adjoint: bool = False) -> torch.Tensor:
     """``kernel`` (odd length, symmetric) correlated with ``image`` ``(B, C, H, W)`` along
     ``axis`` (3: x, 2: y), borders replicated; with ``adjoint`` the transpose of that map."""
     b, c, h, w = image.shape
-    source = array(image).reshape(b * c, h, w)
-    weights = array(kernel.to(image.dtype))
-    out = np.empty_like(source)
+    taps = kernel.to(image.dtype).tolist()
+    size = image.shape[axis]
+    if adjoint and size == 1:  # both ends of the line are the one pixel: it reads every tap
+        return image * sum(taps)
+    radius = (len(taps) - 1) // 2
+    Float = float_type(image.dtype)
     with kernel_threads():
-        if axis == 3:
-            (_correlate_rows_adjoint if adjoint else _correlate_rows)(source, weights, out)
+        grid = Grid(b * c, h, w, Float)
+        line = _Line(grid, axis)
+        # the taps are data of the kernel, not constants of its code
+        weights, opaque_radius = dr.opaque(Float(taps)), runtime(Int32, radius)
+        pixels = flat(image, Float)
+        if adjoint:
+            # at an end of the line, the tap at distance d also takes the gradient of the taps
+            # beyond it that the border replicated: sum_(|j| >= |d|) w_j on the outer side
+            border = dr.opaque(Float([sum(taps[: radius - abs(k - radius) + 1]) for k in range(len(taps))]))
+            out = _correlate_adjoint(pixels, weights, border, opaque_radius, line, Float)
         else:
-            _correlate_columns(source, weights, out, adjoint)
-    return torch.from_numpy(out).view(b, c, h, w)
+            out = _correlate(pixels, weights, opaque_radius, line, Float)
+        dr.eval(out)
+        return as_tensor(out, (b, c, h, w))
 
 
 class FixedBlurAxis(torch.autograd.Function):
@@ -105,99 +114,128 @@ class FixedBlurAxis(torch.autograd.Function):
         return correlate_axis(grad, kernel, ctx.axis, adjoint=True), None, None
 
 
-@njit(inline="always")
-def _clamp(index: int, size: int) -> int:
-    return min(max(index, 0), size - 1)
+class _Varying:
+    """The inputs of the varying blur as lanes: the image, its channels' offsets, the line and
+    the per-pixel sigma with the start of its weight recurrence."""
+
+    def __init__(self, image: torch.Tensor, sigma: torch.Tensor, axis: int, radius: int, support: float) -> None:
+        b, c, h, w = image.shape
+        Float = float_type(image.dtype)
+        self.grid = grid = Grid(b, h, w, Float)
+        self.Float, self.channels = Float, c
+        self.pixels = flat(image, Float)
+        self.line = _Line(grid, axis)
+        self.starts = [k * grid.runtime_plane for k in range(c)]
+        self.own = [grid.channel_start(k, c) + grid.pixel for k in range(c)]
+        self.sigma = grid.load_broadcast(sigma)
+        self.support = support
+        self.reach = support * self.sigma
+        self.first = dr.exp(-0.5 / (self.sigma * self.sigma))  # w_1
+        self.radius = dr.opaque(Int32, radius)  # a parameter: one kernel for every radius
+
+    def going_on(self, k):
+        """Whether tap ``k`` counts: within the radius, and the nearest or within the support."""
+        return (k <= self.radius) & ((k <= 1) | (self.Float(k) <= self.reach))
+
+    def neighbours(self, k):
+        """Flat offsets of the pixels ``k`` before and after the lane's along its line, clamped,
+        within one channel of a ``(B, C, H, W)`` array (add the channel's ``start``)."""
+        before, after = self.line.clamped(-k), self.line.clamped(k)
+        picture = self.grid.picture * ((self.channels - 1) * self.grid.runtime_plane)
+        return before + picture, after + picture
+
+    def pair(self, k, channel: int):
+        before, after = self.neighbours(k)
+        start = self.starts[channel]
+        return dr.gather(self.Float, self.pixels, before + start) + dr.gather(self.Float, self.pixels, after + start)
 
 
-@njit(parallel=True, cache=True, fastmath=FASTMATH)
-def _varying_lines(image, sigma, radius, support, out):
-    """Blur each line (the last axis) of ``image`` ``(B, C, L, N)`` with the per-pixel ``sigma``
-    ``(B, 1, L, N)``: ``sum_k w_k v_(n+k) / sum_k w_k``, ``w_k = exp(-k^2 / (2 sigma^2))`` for
-    ``|k| <= 1`` or ``|k| <= support * sigma`` (``|k| <= radius``), borders replicated."""
-    batch, channels, lines, size = image.shape
-    for task in prange(batch * lines):
-        b, line = task // lines, task % lines
-        for n in range(size):
-            deviation = sigma[b, 0, line, n]
-            reach = support * deviation
-            first = np.exp(-0.5 / (deviation * deviation))  # w_1; w_k = w_(k-1) * first * step^(k-1)
-            step = first * first
-            for c in range(channels):
-                values = image[b, c, line]
-                total = values[n]
-                norm = 1.0
-                weight = 1.0
-                ratio = first
-                for k in range(1, radius + 1):
-                    if k > 1 and k > reach:
-                        break
-                    weight *= ratio
-                    ratio *= step
-                    total += weight * (values[_clamp(n - k, size)] + values[_clamp(n + k, size)])
-                    norm += 2.0 * weight
-                out[b, c, line, n] = total / norm
+def _varying_lines(inputs: _Varying):
+    """The blurred channels of the lanes' pixels."""
+    Float = inputs.Float
+    step = inputs.first * inputs.first
+    centre = [dr.gather(Float, inputs.pixels, own) for own in inputs.own]
+
+    def body(k, weight, ratio, norm, *totals):
+        weight = weight * ratio
+        totals = tuple(dr.fma(weight, inputs.pair(k, c), total) for c, total in enumerate(totals))
+        return (k + 1, weight, ratio * step, dr.fma(2.0, weight, norm), *totals)
+
+    state = (Int32(1), Float(1.0), inputs.first, Float(1.0), *centre)
+    _, _, _, norm, *totals = dr.while_loop(state, lambda k, *_: inputs.going_on(k), body)
+    out = [total / norm for total in totals]
+    dr.eval(*out)
+    return out
 
 
-@njit(parallel=True, cache=True, fastmath=FASTMATH)
-def _varying_lines_adjoint(image, sigma, radius, support, grad, g_image, g_sigma):
-    """Gradients of :func:`_varying_lines`: ``g_image`` scattered along each line (one task owns a
-    line) and ``g_sigma = sum_c g_c / (N sigma^3) * sum_k k^2 w_k (v_(n+k) - out)``."""
-    batch, channels, lines, size = image.shape
-    for task in prange(batch * lines):
-        b, line = task // lines, task % lines
+def _varying_lines_adjoint(inputs: _Varying, grad, need_image: bool):
+    """Sigma's gradient and, for the image's, each pixel's output gradient over its norm,
+    ``g_total = g / N``, with the sums of the weights of its taps that fell beyond the first and
+    the last pixel of its line (which the replicated border gives to those pixels)."""
+    Float, channels, line = inputs.Float, inputs.channels, inputs.line
+    step = inputs.first * inputs.first
+    centre = [dr.gather(Float, inputs.pixels, own) for own in inputs.own]
+    last = line.size - 1
+
+    def sums(k, weight, ratio, norm, moment, beyond_first, beyond_last, *per_channel):
+        # totals sum_k w_k v (with the centre) and spreads sum_k k^2 w_k v per channel
+        weight = weight * ratio
+        k_sq = Float(k * k)
+        totals, spreads = list(per_channel[:channels]), list(per_channel[channels:])
         for c in range(channels):
-            g_image[b, c, line, :] = 0.0
-        for n in range(size):
-            deviation = sigma[b, 0, line, n]
-            reach = support * deviation
-            first = np.exp(-0.5 / (deviation * deviation))
-            step = first * first
-            g_deviation = 0.0
-            for c in range(channels):
-                values = image[b, c, line]
-                g_values = g_image[b, c, line]
-                total = values[n]
-                spread = 0.0  # sum_k k^2 w_k v_(n+k)
-                norm = 1.0
-                moment = 0.0  # sum_k k^2 w_k
-                weight = 1.0
-                ratio = first
-                for k in range(1, radius + 1):
-                    if k > 1 and k > reach:
-                        break
-                    weight *= ratio
-                    ratio *= step
-                    pair = values[_clamp(n - k, size)] + values[_clamp(n + k, size)]
-                    total += weight * pair
-                    norm += 2.0 * weight
-                    spread += k * k * weight * pair
-                    moment += 2.0 * k * k * weight
-                g_total = grad[b, c, line, n] / norm
-                g_deviation += g_total * (spread - total / norm * moment)
-                g_values[n] += g_total
-                weight = 1.0
-                ratio = first
-                for k in range(1, radius + 1):
-                    if k > 1 and k > reach:
-                        break
-                    weight *= ratio
-                    ratio *= step
-                    g_values[_clamp(n - k, size)] += g_total * weight
-                    g_values[_clamp(n + k, size)] += g_total * weight
-            g_sigma[b, 0, line, n] = g_deviation / (deviation * deviation * deviation)
+            pair = inputs.pair(k, c)
+            totals[c] = dr.fma(weight, pair, totals[c])
+            spreads[c] = dr.fma(k_sq * weight, pair, spreads[c])
+        norm = dr.fma(2.0, weight, norm)
+        moment = dr.fma(2.0 * k_sq, weight, moment)
+        beyond_first += dr.select(k > line.position, weight, 0.0)
+        beyond_last += dr.select(k > last - line.position, weight, 0.0)
+        return (k + 1, weight, ratio * step, norm, moment, beyond_first, beyond_last, *totals, *spreads)
+
+    zeros = [Float(0.0) for _ in range(3 + channels)]  # moment, beyond the ends, spreads
+    state = (Int32(1), Float(1.0), inputs.first, Float(1.0), *zeros[:3], *centre, *zeros[3:])
+    _, _, _, norm, moment, beyond_first, beyond_last, *per_channel = dr.while_loop(
+        state, lambda k, *_: inputs.going_on(k), sums
+    )
+    totals, spreads = per_channel[:channels], per_channel[channels:]
+    g_totals = [dr.gather(Float, grad, own) / norm for own in inputs.own]
+    g_deviation = Float(0.0)
+    for total, spread, g_total in zip(totals, spreads, g_totals):
+        g_deviation = dr.fma(g_total, spread - total / norm * moment, g_deviation)
+    sigma = inputs.sigma
+    g_sigma = g_deviation / (sigma * sigma * sigma)
+    if not need_image:
+        dr.eval(g_sigma)
+        return g_sigma, None
+    dr.eval(g_sigma, sigma, beyond_first, beyond_last, *g_totals)  # sigma per pixel, for the gathers
+    return g_sigma, (g_totals, beyond_first, beyond_last)
 
 
-def _lines(tensor: torch.Tensor, axis: int) -> np.ndarray:
-    """A ``(B, C, H, W)`` tensor with the lines along ``axis`` contiguous on its last axis: the
-    tensor itself for x, a transposed copy for y (the kernels then read and scatter along rows)."""
-    return array(tensor if axis == 3 else tensor.transpose(2, 3))
+def _varying_lines_gather(inputs: _Varying, g_totals: list):
+    """The image's gradient within the lines: ``g_total`` of the pixel itself and of every pixel
+    ``n = m -+ k`` whose tap ``k`` reads the lane's pixel ``m``, weighted by ``w_k(sigma_n)``, as
+    gathers (the border's share is added by the caller). Every lane runs all ``radius`` taps."""
+    Float, line = inputs.Float, inputs.line
+    sigma_flat = inputs.sigma  # evaluated by the first pass
+    own = line.index(line.position)
+    totals = [dr.gather(Float, g_total, own) for g_total in g_totals]
 
+    def body(k, *totals):
+        totals = list(totals)
+        distance = Float(k)
+        for other in (line.position + k, line.position - k):
+            inside = (other >= 0) & (other < line.size)
+            index = line.index(dr.select(inside, other, 0))
+            deviation = dr.gather(Float, sigma_flat, index, active=inside)
+            counts = inside & ((k <= 1) | (distance <= inputs.support * deviation))
+            weight = dr.select(counts, dr.exp(-0.5 * distance * distance / (deviation * deviation)), 0.0)
+            for c, g_total in enumerate(g_totals):
+                totals[c] = dr.fma(weight, dr.gather(Float, g_total, index, active=inside), totals[c])
+        return (k + 1, *totals)
 
-def _from_lines(lines: np.ndarray, axis: int) -> torch.Tensor:
-    """The inverse of :func:`_lines`."""
-    tensor = torch.from_numpy(lines)
-    return tensor if axis == 3 else tensor.transpose(2, 3).contiguous()
+    _, *totals = dr.while_loop((Int32(1), *totals), lambda k, *_: k <= inputs.radius, body)
+    dr.eval(*totals)
+    return totals
 
 
 class VaryingBlurAxis(torch.autograd.Function):
@@ -210,36 +248,45 @@ class VaryingBlurAxis(torch.autograd.Function):
         ctx, image: torch.Tensor, sigma: torch.Tensor, axis: int, radius: int, support: float
     ) -> torch.Tensor:
         b, _, h, w = image.shape
-        pixels = _lines(image, axis)
-        out = np.empty_like(pixels)
         with kernel_threads():
-            _varying_lines(pixels, _lines(sigma.expand(b, 1, h, w), axis), radius, support, out)
+            out = to_torch(_varying_lines(_Varying(image, sigma, axis, radius, support)), (b, h, w))
         ctx.save_for_backward(image, sigma)
         ctx.axis, ctx.radius, ctx.support = axis, radius, support
-        return _from_lines(out, axis)
+        return out
 
     @staticmethod
     def backward(ctx, grad: torch.Tensor):  # type: ignore[override]
         image, sigma = ctx.saved_tensors
-        b, _, h, w = image.shape
-        axis = ctx.axis
-        pixels = _lines(image, axis)
-        g_image = np.empty_like(pixels)
-        g_sigma = np.empty((b, 1, *pixels.shape[2:]), dtype=pixels.dtype)
+        b, c, h, w = image.shape
+        need = ctx.needs_input_grad
         with kernel_threads():
-            _varying_lines_adjoint(
-                pixels,
-                _lines(sigma.expand(b, 1, h, w), axis),
-                ctx.radius,
-                ctx.support,
-                _lines(grad, axis),
-                g_image,
-                g_sigma,
+            inputs = _Varying(image, sigma, ctx.axis, ctx.radius, ctx.support)
+            g_sigma, parts = _varying_lines_adjoint(
+                inputs, flat(grad.to(image.dtype), inputs.Float, (b, c, h, w)), need[0]
             )
+            g_sigma = to_torch([g_sigma], (b, h, w))
+            g_image = None
+            if need[0]:
+                g_totals, beyond_first, beyond_last = parts
+                g_image = to_torch(_varying_lines_gather(inputs, g_totals), (b, h, w))
+                _add_border_share(g_image, g_totals, beyond_first, beyond_last, ctx.axis, ctx.radius)
         return (
-            _from_lines(g_image, axis) if ctx.needs_input_grad[0] else None,
-            reduce_to(_from_lines(g_sigma, axis), sigma.shape) if ctx.needs_input_grad[1] else None,
+            g_image,
+            reduce_to(g_sigma, sigma.shape) if need[1] else None,
             None,
             None,
             None,
         )
+
+
+def _add_border_share(g_image: torch.Tensor, g_totals: list, beyond_first, beyond_last, axis: int, radius: int) -> None:
+    """Add to the first and the last pixel of each line the gradient of the taps that fell beyond
+    them (the adjoint of the replicated border): ``sum_n g_total_n * beyond_n`` over the line's
+    first or last ``radius`` pixels, the only ones whose taps reach past its ends."""
+    b, _, h, w = g_image.shape
+    dim, size = axis - 1, g_image.shape[axis]  # the line's dimension in a (B, H, W) channel
+    count = min(radius, size)
+    for end, start, beyond in ((0, 0, beyond_first), (size - 1, size - count, beyond_last)):
+        weights = beyond.torch().view(b, h, w).narrow(dim, start, count)
+        shares = [(g.torch().view(b, h, w).narrow(dim, start, count) * weights).sum(dim) for g in g_totals]
+        g_image.narrow(axis, end, 1).add_(torch.stack(shares, dim=1).unsqueeze(axis))

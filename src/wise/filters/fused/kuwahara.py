@@ -1,6 +1,6 @@
-"""Fused CPU kernel of :func:`wise.filters.kuwahara.anisotropic_kuwahara` after the ellipse is set up:
+"""Fused kernel of :func:`wise.filters.kuwahara.anisotropic_kuwahara` after the ellipse is set up:
 the sample loop of ``_SectorSums`` and the sector blend that follows it (Kyprianidis, Kang &
-Döllner 2009), forward and analytic backward in one loop over pixels.
+Döllner 2009), forward and analytic backward, in Dr.Jit.
 
 Per pixel ``p`` (centre value ``I``) and tap ``t`` at unit-disc position ``(u_t, v_t)``: the
 bilinear, border-clamped sample ``s_t`` at ``p + u_t M + v_t N`` (``M``, ``N`` the major and minor
@@ -10,36 +10,43 @@ means ``m_n = S_n / T``, variances ``v_n = Q_n / T - |m_n|^2``, logits
 ``l_n = -softplus(q / 2 log(K max(v_n, 0) + eps))`` and the output ``I + sum_n softmax(l)_n m_n``.
 
 The PyTorch path holds the sums and every step of the blend as ``(sectors, B, C, H, W)`` tensors;
-here a pixel's sectors stay in small scratch arrays. When a gradient is wanted, forward keeps the
-sums (``sectors * (C + 1)`` numbers a pixel) and backward recomputes the samples once, for the
-gradients of the sums; no per-sample value is kept. The image is read channels-last, so that a
-tap finds all channels of its four corners together, and the kernels compile for the number of
-channels (passed as a tuple of that length), so that the channel loops unroll.
+here each lane is a pixel and its sectors' sums stay in registers. The taps are rings of one tap
+per sector; the kernels loop over the sectors, turning the sectors' sums by one place each time,
+so that a tap always adds to the same places (its sector and the neighbour it leans towards),
+and unroll the rings (forward) or loop over them too (backward, whose scatters would make the
+unrolled code slow to compile); the channels and the blend's sectors unroll. When a gradient is
+wanted, forward keeps the sums (``sectors * (C + 1)`` arrays of one value a pixel) and backward
+recomputes the samples once, for the gradients of the sums, and scatters the image's gradient
+through them; no per-sample value is kept. Arithmetic is in the image's dtype.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from functools import lru_cache
 from typing import Sequence
 
+import drjit as dr
 import numpy as np
 import torch
-from numba import njit, prange
+from drjit.llvm import UInt32
 
-from wise.filters.fused import FASTMATH, chunks, full, kernel_threads, reduce_to
-from wise.filters.fused.bilinear import locate
+from wise.filters.fused import reduce_to
+from wise.filters.fused._drjit import flat, float_type, kernel_threads, to_torch
+from wise.filters.fused._lanes import Grid, minimum, runtime
 
 _SOFTPLUS_GROWTH_THRESHOLD = math.exp(20.0)
 """``exp`` of the input above which :func:`torch.nn.functional.softplus` returns its input (its
 default ``threshold`` is 20)."""
 _MAX_INTEGER_POWER = 64
 """Largest whole ``q / 2`` raised by multiplications instead of ``exp`` and ``log``."""
-_SHARE, _VARIANCE, _DEVIATION, _SLOPE = range(4)
-_BLEND_ROWS = 4
-"""Rows of a pixel's blend scratch array, one value per sector each (see :func:`_sector_shares`)."""
+_POWER_STEPS = _MAX_INTEGER_POWER.bit_length() - 1
+"""Squarings of :func:`_lane_power`, enough for every exponent up to :data:`_MAX_INTEGER_POWER`."""
 _SLOTS = 2
 """Sectors a tap can weigh in: its own and the neighbour it leans towards."""
+_BY_EXP, _MIXED = 0, -1
+"""How :func:`_power_plan` has ``(K max(v, 0) + eps)^(q / 2)`` raised where it is no single whole power."""
 
 
 @lru_cache(maxsize=16)
@@ -57,273 +64,407 @@ def tap_arrays(taps: Sequence) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return positions, sector_index, sector_weight
 
 
-@njit(inline="always")
-def _sample_sectors(
-    picture, y, x, major_x, major_y, minor_x, minor_y, positions, index, weight, sums, squares, channels
-):
-    """``S_n`` into ``sums`` ``(sectors, C)`` and ``Q_n`` into ``squares`` ``(sectors,)`` for pixel
-    ``(y, x)`` of a channels-last ``picture`` ``(H, W, C)``; the axes are in pixels."""
-    height, width = picture.shape[0], picture.shape[1]
-    sums[:] = 0.0
-    squares[:] = 0.0
-    for t in range(positions.shape[0]):
-        along, across = positions[t, 0], positions[t, 1]
-        first, second = index[t, 0], index[t, 1]
-        first_weight, second_weight = weight[t, 0], weight[t, 1]
-        x0, x1, fx, _ = locate(x + along * major_x + across * minor_x, width)
-        y0, y1, fy, _ = locate(y + along * major_y + across * minor_y, height)
-        square = 0.0
-        for c in range(channels):
-            top = picture[y0, x0, c] + fx * (picture[y0, x1, c] - picture[y0, x0, c])
-            bottom = picture[y1, x0, c] + fx * (picture[y1, x1, c] - picture[y1, x0, c])
-            difference = top + fy * (bottom - top) - picture[y, x, c]
-            square += difference * difference
-            sums[first, c] += first_weight * difference
-            sums[second, c] += second_weight * difference
-        squares[first] += first_weight * square
-        squares[second] += second_weight * square
+@dataclass(frozen=True)
+class _Ring:
+    """One ring of taps of ``kuwahara._sample_layout``: tap ``i`` lies at ``positions[i]`` and
+    weighs ``own`` in sector ``i``, ``after`` in sector ``i + 1`` and ``before`` in sector ``i - 1``
+    (at most one of the last two nonzero: the neighbour the ring leans towards)."""
+
+    own: float
+    after: float
+    before: float
+    positions: tuple[tuple[float, float], ...]
 
 
-@njit(inline="always")
-def _integer_power(base: float, exponent: int) -> float:
-    """``base ** exponent`` for ``exponent >= 1`` by repeated squaring."""
-    result = 1.0
+@dataclass(frozen=True)
+class _Layout:
+    """The taps as rings of one tap per sector (the kernels loop over the sectors, so that the
+    traced code holds one tap a ring: every tap unrolled took seconds to compile), every sector's
+    total tap weight ``W_n`` and the blend's constants."""
+
+    rings: tuple[_Ring, ...]
+    sector_weights: tuple[float, ...]
+    total_weight: float
+    variance_scale: float
+    variance_eps: float
+
+    @classmethod
+    def of(cls, taps: Sequence, sectors: int, total_weight: float, variance_scale: float, variance_eps: float):
+        """The layout of ``taps`` in the order of ``kuwahara._sample_layout``: ring by ring, tap ``i``
+        of a ring on sector ``i``'s side; a ``ValueError`` for taps that do not make such rings."""
+        positions, index, weight = tap_arrays(taps)
+        if len(taps) % sectors:
+            raise ValueError(f"{len(taps)} taps do not make rings of {sectors} sectors")
+        rings = []
+        for start in range(0, len(taps), sectors):
+            own, after, before = set(), set(), set()
+            for i in range(sectors):
+                shares = {n: 0.0 for n in range(sectors)}
+                for n, w in zip(index[start + i], weight[start + i]):
+                    shares[int(n)] += float(w)
+                rest = {n for n in shares if n not in (i, (i + 1) % sectors, (i - 1) % sectors)}
+                if any(shares[n] != 0.0 for n in rest):
+                    raise ValueError("a tap weighs in a sector neither its own nor a neighbour")
+                own.add(shares[i])
+                if sectors == 2:  # one neighbour, both ways round
+                    after.add(shares[(i + 1) % sectors])
+                    before.add(0.0)
+                else:
+                    after.add(shares[(i + 1) % sectors])
+                    before.add(shares[(i - 1) % sectors])
+            if max(len(own), len(after), len(before)) > 1:
+                raise ValueError("the taps of a ring weigh differently")
+            ring_positions = tuple((float(u), float(v)) for u, v in positions[start : start + sectors])
+            rings.append(_Ring(own.pop(), after.pop(), before.pop(), ring_positions))
+        sector_weights = [float(w) for w in np.bincount(index.reshape(-1), weight.reshape(-1), minlength=sectors)]
+        return cls(tuple(rings), tuple(sector_weights), float(total_weight), float(variance_scale), float(variance_eps))
+
+    @property
+    def sectors(self) -> int:
+        return len(self.sector_weights)
+
+    def over_sectors(self, Float, rotating: list, state: tuple, body, ring_loop: bool = False) -> tuple[list, tuple]:
+        """Run ``body`` over the sectors ``i`` in a Dr.Jit loop, with the taps of every ring on
+        sector ``i``'s axis: ``rotating, state = body(taps, rotating, state)``, once for all rings
+        (unrolled) or, with ``ring_loop``, once a ring in an inner loop (a smaller kernel).
+
+        ``rotating`` holds one tuple of arrays per sector, turned by one sector each time, so
+        that ``body`` finds sector ``i`` in place 0, ``i + 1`` in place 1 and ``i - 1`` in the
+        last: ``taps`` lists each tap's position and the ``(place, weight)`` it weighs in (Dr.Jit
+        arrays in the loops). Both come back in the sectors' order."""
+        sectors, rings, size = self.sectors, len(self.rings), len(rotating[0])
+        positions = Float([value for i in range(sectors) for ring in self.rings for value in ring.positions[i]])
+        weights = Float([value for ring in self.rings for value in (ring.own, ring.after, ring.before)])
+        neighbours = sorted({0, 1, sectors - 1})  # the places a tap weighs in
+        if sectors == 2:  # one neighbour: every weight outside the own sector is in ``after``
+            neighbours = [0, 1]
+
+        def position(i, j):
+            first = (i * rings + j) * 2
+            return dr.gather(Float, positions, first), dr.gather(Float, positions, first + 1)
+
+        def weigh(ring):
+            return [(place, w) for place, w in zip((0, 1, sectors - 1), ring) if isinstance(w, Float) or w != 0.0]
+
+        def ring_taps(i, turned, rest):
+            if not ring_loop:
+                taps = [
+                    (position(i, j), weigh((ring.own, ring.after, ring.before))) for j, ring in enumerate(self.rings)
+                ]
+                return body(taps, turned, rest)
+
+            def one_ring(j, *values):
+                near = [values[k * size : (k + 1) * size] for k in range(len(neighbours))]
+                places = dict(zip(neighbours, near))
+                ring = [dr.gather(Float, weights, j * 3 + m) for m in range(2 if sectors == 2 else 3)]
+                turned_here = [places.get(n, group) for n, group in enumerate(turned)]
+                turned_here, rest = body(
+                    [(position(i, j), weigh(ring))], turned_here, tuple(values[len(near) * size :])
+                )
+                return (j + 1, *(value for n in neighbours for value in turned_here[n]), *rest)
+
+            _, *values = dr.while_loop(
+                state=(UInt32(0), *(value for n in neighbours for value in turned[n]), *rest),
+                cond=lambda j, *_: j < rings,
+                body=one_ring,
+                label="rings",
+            )
+            turned = list(turned)
+            for k, n in enumerate(neighbours):
+                turned[n] = tuple(values[k * size : (k + 1) * size])
+            return turned, tuple(values[len(neighbours) * size :])
+
+        def loop_body(i, *values):
+            turned = [values[n * size : (n + 1) * size] for n in range(sectors)]
+            turned, rest = ring_taps(i, turned, tuple(values[sectors * size :]))
+            turned = list(turned[1:]) + list(turned[:1])
+            return (i + 1, *(value for group in turned for value in group), *rest)
+
+        _, *values = dr.while_loop(
+            state=(UInt32(0), *(value for group in rotating for value in group), *state),
+            cond=lambda i, *_: i < sectors,
+            body=loop_body,
+            label="sectors",
+        )
+        return [tuple(values[n * size : (n + 1) * size]) for n in range(sectors)], tuple(values[sectors * size :])
+
+
+def _power_plan(sharpness: torch.Tensor) -> int:
+    """How the kernel raises ``g_n = (K max(v_n, 0) + eps)^(q / 2)``: by multiplications where
+    ``q / 2`` is a whole number in ``[1, 64]`` (``q = 8``: the fourth power), else by ``exp`` and
+    ``log``. Returns that whole number where every pixel has the same one (the kernel multiplies
+    by a fixed sequence), :data:`_BY_EXP` where no pixel has one, :data:`_MIXED` otherwise
+    (decided per lane)."""
+    half = 0.5 * sharpness.detach()
+    whole = (half >= 1.0) & (half <= _MAX_INTEGER_POWER) & (half == half.floor())
+    if not bool(whole.any()):
+        return _BY_EXP
+    first = half.reshape(-1)[0]
+    if bool(whole.all()) and bool((half == first).all()):
+        return int(first)
+    return _MIXED
+
+
+def _power(base, exponent: int):
+    """``base ** exponent`` for a whole ``exponent >= 1`` by repeated squaring (the multiplications
+    of :func:`_lane_power` for that exponent)."""
+    result = None
     while exponent > 1:
         if exponent & 1:
-            result *= base
-        base *= base
+            result = base if result is None else result * base
+        base = base * base
         exponent >>= 1
+    return base if result is None else result * base
+
+
+def _lane_power(base, exponent):
+    """``base ** exponent`` for a per-lane whole ``exponent`` in ``[1, 64]``, by repeated squaring."""
+    result = dr.ones(type(base), dr.width(base))
+    for _ in range(_POWER_STEPS):
+        active = exponent > 1
+        result = dr.select(active & ((exponent & 1) != 0), result * base, result)
+        base = dr.select(active, base * base, base)
+        exponent = dr.select(active, exponent >> 1, exponent)
     return result * base
 
 
-@njit(inline="always")
-def _sector_shares(sums, squares, sharpness, total_weight, variance_scale, variance_eps, blend, channels):
-    """The blend's weights ``softmax(l)_n`` and what their gradients need, into the rows of ``blend``
-    ``(_BLEND_ROWS, sectors)``: ``_SHARE``, ``_VARIANCE`` (``v_n``), ``_DEVIATION``
-    (``K max(v_n, 0) + eps``) and ``_SLOPE`` (the derivative of the softplus at ``e_n``).
+@dataclass
+class _Inputs:
+    """The kernel's inputs: the flat image, each lane's centre colour, axes in pixels and ``q``."""
 
-    ``exp(l_n) = 1 / (1 + g_n)`` with ``g_n = (K max(v_n, 0) + eps)^(q / 2) = exp(e_n)``: by
-    multiplications where ``q / 2`` is a small whole number (``q = 8``: the fourth power), else
-    by ``exp`` and ``log``. Above the softplus threshold ``l_n = -e_n``, ``exp(l_n) = 1 / g_n``;
-    where every ``e_n`` lies above it the softmax is taken relative to the smallest, so that no
-    weight underflows.
-    """
-    sectors = sums.shape[0]
-    half_sharpness = 0.5 * sharpness
-    by_multiplication = 1.0 <= half_sharpness <= _MAX_INTEGER_POWER and half_sharpness == math.floor(half_sharpness)
-    smallest = np.inf
-    for n in range(sectors):
-        mean_square = 0.0
-        for c in range(channels):
-            mean = sums[n, c] / total_weight
-            mean_square += mean * mean
-        variance = squares[n] / total_weight - mean_square
-        deviation = max(variance, 0.0) * variance_scale + variance_eps
-        if by_multiplication:
-            growth = _integer_power(deviation, int(half_sharpness))
+    grid: Grid
+    image: object
+    channels: int
+    centre: list
+    major_x: object
+    major_y: object
+    minor_x: object
+    minor_y: object
+    sharpness: object
+
+    @classmethod
+    def of(cls, image: torch.Tensor, major: torch.Tensor, minor: torch.Tensor, sharpness: torch.Tensor) -> "_Inputs":
+        b, c, h, w = image.shape
+        Float = float_type(image.dtype)
+        grid = Grid(b, h, w, Float)
+        pixels = flat(image, Float)
+        lane = grid.picture * grid.runtime_plane + grid.pixel
+        half_width, half_height = runtime(Float, 0.5 * (w - 1)), runtime(Float, 0.5 * (h - 1))
+
+        def axes(vectors: torch.Tensor):  # (B, H, W, 2) in grid units, to pixels
+            values = flat(vectors.to(image.dtype), Float, (b, h, w, 2))
+            x = dr.gather(Float, values, lane * 2)
+            y = dr.gather(Float, values, lane * 2 + 1)
+            return x * half_width, y * half_height
+
+        q = sharpness.to(image.dtype)
+        if q.shape[-2:] == (1, 1):  # one value a picture: read by the lane's picture
+            q_lanes = dr.gather(Float, flat(q, Float, (b, 1, 1, 1)), grid.picture)
         else:
-            growth = math.exp(half_sharpness * math.log(deviation))
-        blend[_VARIANCE, n], blend[_DEVIATION, n], blend[_SHARE, n] = variance, deviation, growth
-        smallest = min(smallest, growth)
+            q_lanes = grid.load(flat(q, Float, (b, 1, h, w)))
+        return cls(
+            grid,
+            pixels,
+            c,
+            [grid.load(pixels, k, c) for k in range(c)],
+            *axes(major),
+            *axes(minor),
+            q_lanes,
+        )
+
+    def locate_tap(self, along: float, across: float):
+        grid = self.grid
+        x = grid.x + along * self.major_x + across * self.minor_x
+        y = grid.y + along * self.major_y + across * self.minor_y
+        return grid.locate(x, y)
+
+
+@dataclass
+class _Blend:
+    """Per sector: the blend's weight ``softmax(l)_n`` and what its gradient needs."""
+
+    shares: list
+    variances: list
+    deviations: list
+    log_deviations: list
+    slopes: list  # the derivative of the softplus at e_n
+
+
+def _blend(sums: list, squares: list, q, layout: _Layout, plan: int) -> _Blend:
+    """``exp(l_n) = 1 / (1 + g_n)`` with ``g_n = (K max(v_n, 0) + eps)^(q / 2) = exp(e_n)`` (see
+    :func:`_power_plan`). Above the softplus threshold ``l_n = -e_n``, ``exp(l_n) = 1 / g_n``;
+    where every ``e_n`` lies above it the softmax is taken relative to the smallest, so that no
+    weight underflows."""
+    total = layout.total_weight
+    half = 0.5 * q
+    if plan == _MIXED:
+        whole = (half >= 1.0) & (half <= _MAX_INTEGER_POWER) & (half == dr.floor(half))
+        exponent = dr.select(whole, UInt32(half), 1)
+    variances, deviations, log_deviations, exponents, growths = [], [], [], [], []
+    for channel_sums, square in zip(sums, squares):
+        mean_square = 0.0
+        for value in channel_sums:
+            mean = value / total
+            mean_square = dr.fma(mean, mean, mean_square)
+        variance = square / total - mean_square
+        deviation = dr.select(variance > 0.0, variance, 0.0) * layout.variance_scale + layout.variance_eps
+        log_deviation = dr.log(deviation)
+        e = half * log_deviation
+        if plan > 0:
+            growth = _power(deviation, plan)
+        elif plan == _BY_EXP:
+            growth = dr.exp(e)
+        else:
+            growth = dr.select(whole, _lane_power(deviation, exponent), dr.exp(e))
+        variances.append(variance)
+        deviations.append(deviation)
+        log_deviations.append(log_deviation)
+        exponents.append(e)
+        growths.append(growth)
+    smallest, least_exponent = growths[0], exponents[0]
+    for growth, e in zip(growths[1:], exponents[1:]):
+        smallest, least_exponent = minimum(smallest, growth), minimum(least_exponent, e)
+    all_above = smallest > _SOFTPLUS_GROWTH_THRESHOLD  # every logit is -e_n (g_n may have overflowed)
+    shares, slopes = [], []
     normaliser = 0.0
-    if smallest > _SOFTPLUS_GROWTH_THRESHOLD:  # every logit is -e_n (g_n may have overflowed)
-        least_exponent = np.inf
-        for n in range(sectors):
-            blend[_SHARE, n] = half_sharpness * math.log(blend[_DEVIATION, n])  # e_n for now
-            least_exponent = min(least_exponent, blend[_SHARE, n])
-        for n in range(sectors):
-            blend[_SHARE, n] = math.exp(least_exponent - blend[_SHARE, n])
-            blend[_SLOPE, n] = 1.0
-            normaliser += blend[_SHARE, n]
-    else:
-        for n in range(sectors):
-            growth = blend[_SHARE, n]
-            if growth > _SOFTPLUS_GROWTH_THRESHOLD:
-                blend[_SHARE, n], blend[_SLOPE, n] = 1.0 / growth, 1.0
-            else:
-                blend[_SHARE, n] = 1.0 / (1.0 + growth)
-                blend[_SLOPE, n] = growth * blend[_SHARE, n]
-            normaliser += blend[_SHARE, n]
-    for n in range(sectors):
-        blend[_SHARE, n] /= normaliser
+    for growth, e in zip(growths, exponents):
+        above = growth > _SOFTPLUS_GROWTH_THRESHOLD
+        below_share = 1.0 / (1.0 + growth)
+        share = dr.select(all_above, dr.exp(least_exponent - e), dr.select(above, 1.0 / growth, below_share))
+        slopes.append(dr.select(all_above | above, 1.0, growth * below_share))
+        shares.append(share)
+        normaliser = normaliser + share
+    return _Blend([share / normaliser for share in shares], variances, deviations, log_deviations, slopes)
 
 
-@njit(inline="always")
-def _forward_pixel(
-    picture, b, y, x, major, minor, sharpness, positions, index, weight, total_weight, variance_scale, variance_eps,
-    accumulated, accumulated_squares, sums, squares, blend, out, channels,
-):  # fmt: skip
-    """Pixel ``(b, y, x)``: its sector sums into ``sums`` and ``squares`` (the input's dtype) and its output."""
-    height, width = picture.shape[0], picture.shape[1]
-    half_width, half_height = 0.5 * (width - 1), 0.5 * (height - 1)
-    major_x, major_y = major[b, y, x, 0] * half_width, major[b, y, x, 1] * half_height
-    minor_x, minor_y = minor[b, y, x, 0] * half_width, minor[b, y, x, 1] * half_height
-    _sample_sectors(
-        picture, y, x, major_x, major_y, minor_x, minor_y, positions, index, weight, accumulated, accumulated_squares,
-        channels,
-    )  # fmt: skip
-    sectors = sums.shape[0]
-    for n in range(sectors):
-        squares[n] = accumulated_squares[n]
-        for c in range(channels):
-            sums[n, c] = accumulated[n, c]
-    _sector_shares(sums, squares, sharpness[b, 0, y, x], total_weight, variance_scale, variance_eps, blend, channels)
-    for c in range(channels):
+def _forward(inputs: _Inputs, layout: _Layout, plan: int, keep: bool):
+    """The output's channels, and the sums ``S_n`` (``sectors x C``) and ``Q_n`` when ``keep``."""
+    grid, channels, image = inputs.grid, inputs.channels, inputs.image
+    sectors, lanes = layout.sectors, grid.lanes
+    starts = [grid.channel_start(k, channels) for k in range(channels)]
+
+    def sector_taps(taps: list, turned: list, state: tuple) -> tuple[list, tuple]:
+        sums = [list(group) for group in turned]  # each place: the channels' S, then Q
+        for (along, across), places in taps:
+            corners = inputs.locate_tap(along, across)
+            square = 0.0
+            for k, (start, centre) in enumerate(zip(starts, inputs.centre)):
+                difference = grid.sample(image, corners, start) - centre
+                square = dr.fma(difference, difference, square)
+                for place, weight in places:
+                    sums[place][k] = dr.fma(weight, difference, sums[place][k])
+            for place, weight in places:
+                sums[place][channels] = dr.fma(weight, square, sums[place][channels])
+        return sums, state
+
+    zeros = [tuple(dr.zeros(grid.Float, lanes) for _ in range(channels + 1)) for _ in range(sectors)]
+    groups, _ = layout.over_sectors(grid.Float, zeros, (), sector_taps)
+    sums = [list(group[:channels]) for group in groups]
+    squares = [group[channels] for group in groups]
+    kept = [value for channel_sums in sums for value in channel_sums] + squares
+    shares = _blend(sums, squares, inputs.sharpness, layout, plan).shares
+    out = []
+    for k, centre in enumerate(inputs.centre):
         blended = 0.0
-        for n in range(sectors):
-            blended += blend[_SHARE, n] * sums[n, c]
-        out[b, c, y, x] = picture[y, x, c] + blended / total_weight
+        for share, channel_sums in zip(shares, sums):
+            blended = dr.fma(share, channel_sums[k], blended)
+        out.append(centre + blended / layout.total_weight)
+    kept = kept if keep else []
+    dr.eval(*out, *kept)
+    return out, kept
 
 
-@njit(parallel=True, cache=True, fastmath=FASTMATH)
-def _forward(
-    image, lanes, major, minor, sharpness, positions, index, weight, total_weight, variance_scale, variance_eps, keep,
-    kept_sums, kept_squares, out,
-):  # fmt: skip
-    batch, height, width = image.shape[:3]
-    channels = len(lanes)  # known when compiling: the channel loops unroll
-    sectors = kept_sums.shape[3]
-    for row in prange(batch * height):
-        b, y = row // height, row % height
-        picture = image[b]
-        accumulated = np.empty((sectors, channels))
-        accumulated_squares = np.empty(sectors)
-        blend = np.empty((_BLEND_ROWS, sectors))
-        pixel_sums = np.empty((sectors, channels), dtype=image.dtype)
-        pixel_squares = np.empty(sectors, dtype=image.dtype)
-        for x in range(width):
-            sums = kept_sums[b, y, x] if keep else pixel_sums
-            squares = kept_squares[b, y, x] if keep else pixel_squares
-            _forward_pixel(
-                picture, b, y, x, major, minor, sharpness, positions, index, weight, total_weight, variance_scale,
-                variance_eps, accumulated, accumulated_squares, sums, squares, blend, out, channels,
-            )  # fmt: skip
-
-
-@njit(inline="always")
-def _backward_pixel(
-    picture, g_picture, b, y, x, major, minor, sharpness, positions, index, weight, total_weight, variance_scale,
-    variance_eps, sector_weights, sums, squares, grad, need_image, need_sharpness, blend, g_sums, g_squares, g_major,
-    g_minor, g_sharpness, channels,
-):  # fmt: skip
-    """Gradients of pixel ``(b, y, x)``'s output: its ``q`` and axes, and scattered into ``g_picture``.
-    ``sector_weights`` ``(sectors,)``: the taps' total weight in each sector."""
-    height, width = picture.shape[0], picture.shape[1]
-    half_width, half_height = 0.5 * (width - 1), 0.5 * (height - 1)
-    sectors = sums.shape[0]
-    q = sharpness[b, 0, y, x]
-    _sector_shares(sums, squares, q, total_weight, variance_scale, variance_eps, blend, channels)
+def _backward(inputs: _Inputs, layout: _Layout, plan: int, kept: list, grad, needs: tuple):
+    """Gradients of the output through the kept sums: ``needs`` says which of (image, major,
+    minor, sharpness) are wanted. Returns the image's scattered gradient (or ``None``) and the
+    per-lane gradients: the centre's channels, the major and minor axes' x and y (in grid units)
+    and ``q``, each ``None`` where it is not wanted."""
+    need_image, need_major, need_minor, need_sharpness = needs
+    grid, channels, image = inputs.grid, inputs.channels, inputs.image
+    Float, total = grid.Float, layout.total_weight
+    sectors = layout.sectors
+    starts = [grid.channel_start(k, channels) for k in range(channels)]
+    sums = [kept[n * channels : (n + 1) * channels] for n in range(sectors)]
+    squares = kept[sectors * channels :]
+    g = [grid.load(grad, k, channels) for k in range(channels)]
+    q = inputs.sharpness
+    blend = _blend(sums, squares, q, layout, plan)
 
     # the blend's backward: gradients of S_n and Q_n, and of q
+    g_shares = []
     mean_g_share = 0.0  # sum_n a_n dL/da_n, for the softmax
-    for n in range(sectors):
+    for share, channel_sums in zip(blend.shares, sums):
         g_share = 0.0
-        for c in range(channels):
-            g_share += grad[b, c, y, x] * sums[n, c]
-        g_squares[n] = g_share / total_weight  # dL/da_n until overwritten below
-        mean_g_share += blend[_SHARE, n] * g_squares[n]
-    g_q = 0.0
+        for g_k, value in zip(g, channel_sums):
+            g_share = dr.fma(g_k, value, g_share)
+        g_share = g_share / total
+        g_shares.append(g_share)
+        mean_g_share = dr.fma(share, g_share, mean_g_share)
+    g_q = Float(0.0)
+    g_sums, g_squares = [], []
     for n in range(sectors):
         # l_n = -softplus(e_n), e_n = q / 2 log(K max(v_n, 0) + eps)
-        share, deviation = blend[_SHARE, n], blend[_DEVIATION, n]
-        g_exponent = -share * (g_squares[n] - mean_g_share) * blend[_SLOPE, n]
+        share = blend.shares[n]
+        g_exponent = -share * (g_shares[n] - mean_g_share) * blend.slopes[n]
         if need_sharpness:
-            g_q += g_exponent * 0.5 * math.log(deviation)
-        g_variance = 0.0
-        if blend[_VARIANCE, n] >= 0.0:  # clamp_min passes the gradient at 0
-            g_variance = g_exponent * 0.5 * q * variance_scale / deviation
-        g_squares[n] = g_variance / total_weight
-        for c in range(channels):
-            mean = sums[n, c] / total_weight
-            g_sums[n, c] = (share * grad[b, c, y, x] - 2.0 * mean * g_variance) / total_weight
-    g_sharpness[b, 0, y, x] = g_q
+            g_q = dr.fma(g_exponent * 0.5, blend.log_deviations[n], g_q)
+        # clamp_min passes the gradient at 0
+        g_variance = dr.select(
+            blend.variances[n] >= 0.0, g_exponent * 0.5 * q * layout.variance_scale / blend.deviations[n], 0.0
+        )
+        g_squares.append(g_variance / total)
+        g_sums.append([(share * g_k - 2.0 * (value / total) * g_variance) / total for g_k, value in zip(g, sums[n])])
 
     # the taps' backward: d_t enters S_n linearly and Q_n through |d_t|^2
-    major_x, major_y = major[b, y, x, 0] * half_width, major[b, y, x, 1] * half_height
-    minor_x, minor_y = minor[b, y, x, 0] * half_width, minor[b, y, x, 1] * half_height
-    g_major_x = g_major_y = g_minor_x = g_minor_y = 0.0
-    for t in range(positions.shape[0]):
-        along, across = positions[t, 0], positions[t, 1]
-        first, second = index[t, 0], index[t, 1]
-        first_weight, second_weight = weight[t, 0], weight[t, 1]
-        x0, x1, fx, x_slope = locate(x + along * major_x + across * minor_x, width)
-        y0, y1, fy, y_slope = locate(y + along * major_y + across * minor_y, height)
-        g_square = 2.0 * (first_weight * g_squares[first] + second_weight * g_squares[second])
-        g_x = g_y = 0.0
-        for c in range(channels):
-            top_left, top_right = picture[y0, x0, c], picture[y0, x1, c]
-            bottom_left, bottom_right = picture[y1, x0, c], picture[y1, x1, c]
-            top_slope, bottom_slope = top_right - top_left, bottom_right - bottom_left
-            top, bottom = top_left + fx * top_slope, bottom_left + fx * bottom_slope
-            difference = top + fy * (bottom - top) - picture[y, x, c]
-            g_difference = g_square * difference + first_weight * g_sums[first, c] + second_weight * g_sums[second, c]
-            g_x += g_difference * (top_slope + fy * (bottom_slope - top_slope))
-            g_y += g_difference * (bottom - top)
-            if need_image:
-                g_top, g_bottom = g_difference * (1.0 - fy), g_difference * fy
-                g_picture[y0, x0, c] += g_top * (1.0 - fx)
-                g_picture[y0, x1, c] += g_top * fx
-                g_picture[y1, x0, c] += g_bottom * (1.0 - fx)
-                g_picture[y1, x1, c] += g_bottom * fx
-        g_x *= x_slope
-        g_y *= y_slope
-        g_major_x += along * g_x
-        g_major_y += along * g_y
-        g_minor_x += across * g_x
-        g_minor_y += across * g_y
+    g_image = dr.zeros(Float, grid.batch * channels * grid.plane) if need_image else None
+
+    def sector_taps(taps: list, turned: list, state: tuple) -> tuple[list, tuple]:
+        g_major_x, g_major_y, g_minor_x, g_minor_y = state
+        for (along, across), places in taps:
+            corners = inputs.locate_tap(along, across)
+            g_square = 0.0
+            for place, weight in places:
+                g_square = dr.fma(2.0 * weight, turned[place][channels], g_square)
+            g_x, g_y = 0.0, 0.0
+            for k, (start, centre) in enumerate(zip(starts, inputs.centre)):
+                value, slope_x, slope_y = grid.sample_with_slopes(image, corners, start)
+                g_difference = g_square * (value - centre)
+                for place, weight in places:
+                    g_difference = dr.fma(weight, turned[place][k], g_difference)
+                g_x = dr.fma(g_difference, slope_x, g_x)
+                g_y = dr.fma(g_difference, slope_y, g_y)
+                if need_image:
+                    grid.scatter(g_image, g_difference, corners, start)
+            g_x = dr.select(corners.moves_x, g_x, 0.0)
+            g_y = dr.select(corners.moves_y, g_y, 0.0)
+            if need_major:
+                g_major_x, g_major_y = dr.fma(along, g_x, g_major_x), dr.fma(along, g_y, g_major_y)
+            if need_minor:
+                g_minor_x, g_minor_y = dr.fma(across, g_x, g_minor_x), dr.fma(across, g_y, g_minor_y)
+        return turned, (g_major_x, g_major_y, g_minor_x, g_minor_y)
+
+    # the gradients of each sector's S (channels) and Q, turned with the sectors in the loop; one
+    # ring at a time, as the scatters of every ring unrolled take long to compile
+    gradients = [(*g_sums[n], g_squares[n]) for n in range(sectors)]
+    zeros = tuple(dr.zeros(Float, grid.lanes) for _ in range(4))
+    _, (g_major_x, g_major_y, g_minor_x, g_minor_y) = layout.over_sectors(
+        Float, gradients, zeros, sector_taps, ring_loop=True
+    )
     # back from pixels to grid units
-    g_major[b, y, x, 0], g_major[b, y, x, 1] = g_major_x * half_width, g_major_y * half_height
-    g_minor[b, y, x, 0], g_minor[b, y, x, 1] = g_minor_x * half_width, g_minor_y * half_height
+    half_width, half_height = runtime(Float, 0.5 * (grid.width - 1)), runtime(Float, 0.5 * (grid.height - 1))
+    axes = [g_major_x * half_width, g_major_y * half_height] if need_major else [None, None]
+    axes += [g_minor_x * half_width, g_minor_y * half_height] if need_minor else [None, None]
+    g_centre = [None] * channels
     if need_image:
         # the centre enters every d_t: sum_t dL/dd_t = sum_n (W_n dL/dS_n + 2 S_n dL/dQ_n), W_n = sum_t w_tn
-        for c in range(channels):
-            g_centre = grad[b, c, y, x]
+        for k in range(channels):
+            g_centre_k = g[k]
             for n in range(sectors):
-                g_centre -= sector_weights[n] * g_sums[n, c] + 2.0 * sums[n, c] * g_squares[n]
-            g_picture[y, x, c] += g_centre
-
-
-@njit(parallel=True, cache=True, fastmath=FASTMATH)
-def _backward(
-    image, lanes, major, minor, sharpness, positions, index, weight, total_weight, variance_scale, variance_eps,
-    kept_sums, kept_squares, grad, need_image, need_sharpness, g_image_parts, g_image, g_major, g_minor, g_sharpness,
-):  # fmt: skip
-    batch, height, width = image.shape[:3]
-    channels = len(lanes)
-    sectors = kept_sums.shape[3]
-    parts = g_image_parts.shape[0]
-    rows = batch * height
-    for part in prange(parts):
-        g_part = g_image_parts[part]
-        if need_image:
-            g_part[:] = 0.0
-        blend = np.empty((_BLEND_ROWS, sectors))
-        g_sums = np.empty((sectors, channels))
-        g_squares = np.empty(sectors)
-        sector_weights = np.zeros(sectors)
-        for t in range(index.shape[0]):
-            for slot in range(_SLOTS):
-                sector_weights[index[t, slot]] += weight[t, slot]
-        for row in range(part * rows // parts, (part + 1) * rows // parts):
-            b, y = row // height, row % height
-            picture = image[b]
-            g_picture = g_part[b] if need_image else g_part[0]
-            for x in range(width):
-                sums, squares = kept_sums[b, y, x], kept_squares[b, y, x]
-                _backward_pixel(
-                    picture, g_picture, b, y, x, major, minor, sharpness, positions, index, weight, total_weight,
-                    variance_scale, variance_eps, sector_weights, sums, squares, grad, need_image, need_sharpness,
-                    blend, g_sums, g_squares, g_major, g_minor, g_sharpness, channels,
-                )  # fmt: skip
-    if need_image:  # the parts' sum, in a fixed order, back to (B, C, H, W)
-        for row in prange(rows):
-            b, y = row // height, row % height
-            for x in range(width):
-                for c in range(channels):
-                    total = g_image_parts[0, b, y, x, c]
-                    for part in range(1, parts):
-                        total += g_image_parts[part, b, y, x, c]
-                    g_image[b, c, y, x] = total
+                g_centre_k = g_centre_k - (layout.sector_weights[n] * g_sums[n][k] + 2.0 * sums[n][k] * g_squares[n])
+            g_centre[k] = g_centre_k
+    outputs = [*g_centre, *axes, g_q if need_sharpness else None]
+    dr.eval(*(o for o in [g_image, *outputs] if o is not None))
+    return g_image, outputs
 
 
 class AnisotropicKuwahara(torch.autograd.Function):
@@ -352,47 +493,36 @@ class AnisotropicKuwahara(torch.autograd.Function):
         grad_enabled: bool,
     ) -> torch.Tensor:
         b, c, h, w = image.shape
-        arguments = _arguments(image, major, minor, sharpness, taps, total_weight, variance_scale, variance_eps)
-        dtype = arguments[0].dtype
+        layout = _Layout.of(taps, sectors, total_weight, variance_scale, variance_eps)
+        plan = _power_plan(sharpness)
         keep = grad_enabled and any(ctx.needs_input_grad)  # the sums for backward, else not kept
-        kept_shape = (b, h, w) if keep else (1, 1, 1)
-        kept_sums = np.empty((*kept_shape, sectors, c), dtype=dtype)
-        kept_squares = np.empty((*kept_shape, sectors), dtype=dtype)
-        out = np.empty((b, c, h, w), dtype=dtype)
         with kernel_threads():
-            _forward(*arguments, keep, kept_sums, kept_squares, out)
+            out, kept = _forward(_Inputs.of(image, major, minor, sharpness), layout, plan, keep)
+            out = to_torch(out, (b, h, w))
         ctx.save_for_backward(image, major, minor, sharpness)  # checks that they are not changed in place
-        ctx.arguments = (*arguments, kept_sums, kept_squares)
-        return torch.from_numpy(out)
+        ctx.layout, ctx.plan, ctx.kept = layout, plan, kept
+        return out
 
     @staticmethod
     def backward(ctx, grad: torch.Tensor):  # type: ignore[override]
         image, major, minor, sharpness = ctx.saved_tensors
         b, c, h, w = image.shape
-        need_image = ctx.needs_input_grad[0]
-        dtype = ctx.arguments[0].dtype
-        g_image_parts = np.empty((chunks(), *((b, h, w, c) if need_image else (1, 1, 1, 1))), dtype=dtype)
-        g_image = np.empty((b, c, h, w) if need_image else (1, 1, 1, 1), dtype=dtype)
-        g_major = np.empty((b, h, w, 2), dtype=dtype)
-        g_minor = np.empty_like(g_major)
-        g_sharpness = np.empty((b, 1, h, w), dtype=dtype)
+        needs = tuple(ctx.needs_input_grad[:4])
         with kernel_threads():
-            _backward(
-                *ctx.arguments,
-                full(grad.to(image.dtype), (b, c, h, w)),
-                need_image,
-                ctx.needs_input_grad[3],
-                g_image_parts,
-                g_image,
-                g_major,
-                g_minor,
-                g_sharpness,
-            )
+            inputs = _Inputs.of(image, major, minor, sharpness)
+            grad_flat = flat(grad.to(image.dtype), inputs.grid.Float, (b, c, h, w))
+            g_image, outputs = _backward(inputs, ctx.layout, ctx.plan, ctx.kept, grad_flat, needs)
+            g_centre, axes, g_q = outputs[:c], outputs[c : c + 4], outputs[c + 4]
+            if needs[0]:
+                g_image = g_image.torch().view(b, c, h, w) + to_torch(g_centre, (b, h, w))
+            g_major = torch.stack([a.torch().view(b, h, w) for a in axes[:2]], dim=-1) if needs[1] else None
+            g_minor = torch.stack([a.torch().view(b, h, w) for a in axes[2:]], dim=-1) if needs[2] else None
+            g_sharpness = g_q.torch().view(b, 1, h, w) if needs[3] else None
         return (
-            torch.from_numpy(g_image) if need_image else None,
-            reduce_to(torch.from_numpy(g_major), major.shape) if ctx.needs_input_grad[1] else None,
-            reduce_to(torch.from_numpy(g_minor), minor.shape) if ctx.needs_input_grad[2] else None,
-            reduce_to(torch.from_numpy(g_sharpness), sharpness.shape) if ctx.needs_input_grad[3] else None,
+            g_image,
+            reduce_to(g_major, major.shape) if needs[1] else None,
+            reduce_to(g_minor, minor.shape) if needs[2] else None,
+            reduce_to(g_sharpness, sharpness.shape) if needs[3] else None,
             None,
             None,
             None,
@@ -400,25 +530,3 @@ class AnisotropicKuwahara(torch.autograd.Function):
             None,
             None,
         )
-
-
-def _arguments(image, major, minor, sharpness, taps, total_weight: float, variance_scale: float, variance_eps: float):
-    """The kernels' leading arguments: the image channels-last ``(B, H, W, C)`` (a tap reads all
-    channels of a corner at once), a tuple of ``C`` zeros, the axes and ``q`` full-shaped, the taps,
-    all of the image's dtype."""
-    b, c, h, w = image.shape
-    pixels = image.detach().permute(0, 2, 3, 1).contiguous().numpy()
-    positions, index, weight = tap_arrays(taps)
-    return (
-        pixels,
-        (0,) * c,  # one lane per channel: the kernels compile for the number of channels
-        full(major.to(image.dtype), (b, h, w, 2)),
-        full(minor.to(image.dtype), (b, h, w, 2)),
-        full(sharpness.to(image.dtype), (b, 1, h, w)),
-        positions.astype(pixels.dtype),
-        index,
-        weight.astype(pixels.dtype),
-        float(total_weight),
-        float(variance_scale),
-        float(variance_eps),
-    )

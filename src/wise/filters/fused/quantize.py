@@ -1,100 +1,116 @@
-"""Fused CPU kernel of the candidate scores of :func:`wise.filters.quantize.quantize`'s numeric
-gradient for the number of bins (Lötzsch et al. 2022, supplement, "Color Quantization").
+"""Fused kernel of the candidate scores of :func:`wise.filters.quantize.quantize`'s numeric
+gradient for the number of bins (Lötzsch et al. 2022, supplement, "Color Quantization"), in Dr.Jit.
 
 For every candidate bin count ``r = max(b + o, 1)`` (one per offset ``o``) and image, the score
-``f(r) = sum_i sign(y_i - q_r(x_i)) sign(g_i)``: one pass over the pixels evaluates every candidate,
-where the PyTorch path sets off a dozen full-image tensors per candidate.
+``f(r) = sum_i sign(y_i - q_r(x_i)) sign(g_i)``: one lane per pixel evaluates every candidate in a
+loop and adds its count (over the channels) to the candidate's score of its image, where the
+PyTorch path sets off a dozen full-image tensors per candidate. The scores are integers, so the
+order in which the lanes add them does not matter. The scores have no gradient: they run inside
+the backward pass of :class:`wise.filters.quantize._NumericBinsGradient`.
 
 The quantizer is evaluated with the same operations in the same order and precision as the
 PyTorch path, without reassociation or fused multiply-add (a different rounding could flip the
 sign of ``y - q_r(x)`` where the two nearly meet and so change a score). The one exception is
-``tanh``, taken from one exponential by a short series (the C library's ``tanh`` costs more than
-the rest of the loop): it may differ from PyTorch's in the last bit, so a score can differ where
-``y`` and ``q_r(x)`` agree to the last bit (the tests find none in float32 or float64).
+``tanh``, taken from one exponential by a short series (``2 ** n`` built from its exponent bits,
+``2 ** f`` by its Taylor series): it may differ from PyTorch's in the last bit, so a score can
+differ where ``y`` and ``q_r(x)`` agree to the last bit (the tests find none in float32 or float64).
 """
 
 from __future__ import annotations
 
 import math
 
-import numpy as np
+import drjit as dr
 import torch
-from numba import njit, prange
 
-from wise.filters.fused import full, kernel_threads
+from wise.filters.fused._drjit import flat, float_type, kernel_threads
+from wise.filters.fused._lanes import Grid
 
-_HALF, _ONE, _MIN_BINS, _LOG2_E, _MIN_EXPONENT = range(5)
-"""Positions in the array of constants, which carries them in the image's dtype (a Python
-float literal would promote float32 arithmetic to float64 and round differently)."""
 MIN_EXPONENT = -60
 """``2 ** -60`` is below half a unit in the last place of 1 in float64: beyond it ``tanh`` is 1."""
 _TAYLOR_TERMS = 14
 """Terms of the series of ``2 ** f = e ** (f ln 2)`` for ``|f| <= 1/2``: the next one is below 1e-17."""
+_SERIES = tuple(math.log(2.0) ** k / math.factorial(k) for k in range(_TAYLOR_TERMS))
+_LOG2_E = 1.0 / math.log(2.0)
 
 
-@njit(inline="always")
-def _exp2(t, constants, powers, series):
-    """``2 ** t`` for ``t <= 0``: ``2 ** n`` from a table, ``2 ** f`` (``|f| <= 1/2``) by its Taylor series."""
-    t = max(t, constants[_MIN_EXPONENT])
-    whole = np.rint(t)
+def _types(Float):
+    """The signed and unsigned integer types as wide as ``Float``, and its exponent bias and mantissa bits."""
+    import drjit.llvm as backend
+
+    if Float is backend.Float64:
+        return backend.Int64, backend.UInt64, 1023, 52
+    return backend.Int32, backend.UInt32, 127, 23
+
+
+def _exp2(t, Float):
+    """``2 ** t`` for ``t <= 0``: ``2 ** n`` from its exponent bits, ``2 ** f`` (``|f| <= 1/2``) by its
+    Taylor series (Horner, no fused multiply-add)."""
+    Int, UInt, bias, mantissa = _types(Float)
+    t = dr.select(MIN_EXPONENT > t, Float(MIN_EXPONENT), t)
+    whole = dr.round(t)  # to the nearest, ties to even
     f = t - whole
-    p = series[13]
-    p = p * f + series[12]
-    p = p * f + series[11]
-    p = p * f + series[10]
-    p = p * f + series[9]
-    p = p * f + series[8]
-    p = p * f + series[7]
-    p = p * f + series[6]
-    p = p * f + series[5]
-    p = p * f + series[4]
-    p = p * f + series[3]
-    p = p * f + series[2]
-    p = p * f + series[1]
-    p = p * f + series[0]
-    return p * powers[-int(whole)]
+    p = Float(_SERIES[-1])
+    for coefficient in reversed(_SERIES[:-1]):
+        p = p * f + coefficient
+    power = dr.reinterpret_array(Float, UInt(Int(whole) + bias) << mantissa)
+    return p * power
 
 
-@njit(inline="always")
-def _tanh(z, constants, powers, series):
+def _tanh(z, Float):
     """``tanh(z) = sign(z) (1 - e^-2|z|) / (1 + e^-2|z|)``, within a few units in the last place."""
-    one = constants[_ONE]
-    decay = _exp2(-(abs(z) + abs(z)) * constants[_LOG2_E], constants, powers, series)
-    magnitude = (one - decay) / (one + decay)
-    return magnitude if z >= 0 else -magnitude
+    magnitude = dr.abs(z)
+    decay = _exp2(-(magnitude + magnitude) * _LOG2_E, Float)
+    ratio = (1.0 - decay) / (1.0 + decay)
+    return dr.select(z >= 0, ratio, -ratio)
 
 
-@njit(parallel=True, cache=True)
-def _candidate_scores(x, y, grad, bins, softness, offsets, constants, powers, series, soft, partial):
-    """``partial[task, k]``: the score of candidate ``k`` over the pixels of one row of one image
-    (``task = b * H + row``), so that no two tasks add to the same count."""
-    batch, channels, height, width = x.shape
-    half, one, min_bins = constants[_HALF], constants[_ONE], constants[_MIN_BINS]
-    for task in prange(batch * height):
-        b, row = task // height, task % height
-        base = bins[b, 0, row]
-        ramp_width = softness[b, 0, row]
-        ramp_norm = np.empty_like(ramp_width)  # 1 / tanh(1 / 2 softness) / 2, once per pixel
-        for column in range(width):
-            ramp_norm[column] = half / _tanh(half / ramp_width[column], constants, powers, series) if soft else half
-        for k in range(offsets.shape[0]):
-            total = 0
-            for c in range(channels):
-                values, targets, directions = x[b, c, row], y[b, c, row], grad[b, c, row]
-                for column in range(width):
-                    candidate = max(base[column] + offsets[k], min_bins)
-                    scaled = values[column] * candidate
-                    last = np.ceil(candidate) - one
-                    if soft:  # wise.filters.quantize._soft_levels, operation by operation
-                        boundary = min(max(np.rint(scaled), one), max(last, one))
-                        ramp = _tanh((scaled - boundary) / ramp_width[column], constants, powers, series)
-                        level = (boundary + ramp * ramp_norm[column]) / candidate
-                    else:  # _hard_levels
-                        level = (min(max(np.floor(scaled), half - half), last) + half) / candidate
-                    move = targets[column] - level
-                    direction = directions[column]
-                    total += ((move > 0) - (move < 0)) * ((direction > 0) - (direction < 0))
-            partial[task, k] = total
+def _sign(value, Int):
+    return dr.select(value > 0, Int(1), Int(0)) - dr.select(value < 0, Int(1), Int(0))
+
+
+def _candidate_scores(grid: Grid, x, y, grad, channels: int, base, ramp_width, offsets, min_bins: float):
+    """The scores ``(K * B)`` (candidate-major) of the ``K`` candidates ``max(base + offsets[k], min_bins)``
+    for the flat images ``x``, ``y`` and ``grad`` and the lanes' bins ``base`` and ramp widths
+    ``ramp_width`` (None: hard steps); a symbolic loop over the candidates."""
+    Float = grid.Float
+    Int = dr.int32_array_t(Float)
+    UInt = type(grid.pixel)
+    candidates = dr.width(offsets)
+    values = [grid.load(x, c, channels) for c in range(channels)]
+    targets = [grid.load(y, c, channels) for c in range(channels)]
+    directions = [_sign(grid.load(grad, c, channels), Int) for c in range(channels)]
+    soft = ramp_width is not None
+    ramp_norm = 0.5 / _tanh(0.5 / ramp_width, Float) if soft else None  # 1 / tanh(1 / 2 softness) / 2
+    scores = dr.zeros(Int, candidates * grid.batch)
+
+    def body(k):
+        offset = dr.gather(Float, offsets, k)
+        candidate = base + offset
+        candidate = dr.select(min_bins > candidate, Float(min_bins), candidate)
+        last = dr.ceil(candidate) - 1.0
+        total = Int(0)
+        for value, target, direction in zip(values, targets, directions):
+            scaled = value * candidate
+            if soft:  # wise.filters.quantize._soft_levels, operation by operation
+                boundary = dr.round(scaled)
+                boundary = dr.select(1.0 > boundary, Float(1.0), boundary)
+                top = dr.select(1.0 > last, Float(1.0), last)
+                boundary = dr.select(top < boundary, top, boundary)
+                ramp = _tanh((scaled - boundary) / ramp_width, Float)
+                level = (boundary + ramp * ramp_norm) / candidate
+            else:  # _hard_levels
+                index = dr.floor(scaled)
+                index = dr.select(0.0 > index, Float(0.0), index)
+                index = dr.select(last < index, last, index)
+                level = (index + 0.5) / candidate
+            total += _sign(target - level, Int) * direction
+        dr.scatter_add(scores, total, k * grid.batch + grid.picture, mode=dr.ReduceMode.Expand)
+        return (k + 1,)
+
+    dr.while_loop(state=(dr.zeros(UInt, grid.lanes),), cond=lambda k: k < candidates, body=body)
+    dr.eval(scores)
+    return scores
 
 
 def candidate_scores(
@@ -116,23 +132,20 @@ def candidate_scores(
         min_bins: the smallest bin count.
     """
     b, c, h, w = x.shape
-    dtype = x.detach().numpy().dtype
-    soft = softness is not None
-    powers = 2.0 ** -np.arange(-MIN_EXPONENT + 1, dtype=dtype)
-    series = np.array([np.log(2.0) ** k / math.factorial(k) for k in range(_TAYLOR_TERMS)], dtype=dtype)
-    partial = np.empty((b * h, len(offsets)), dtype=np.int64)
+    dtype = x.dtype
+    Float = float_type(dtype)
     with kernel_threads():
-        _candidate_scores(
-            full(x, x.shape),
-            full(y, x.shape),
-            full(grad, x.shape),
-            full(bins, (b, 1, h, w)),
-            full(softness if soft else bins, (b, 1, h, w)),  # not read on hard steps
-            np.asarray(offsets, dtype=dtype),
-            np.asarray((0.5, 1.0, min_bins, 1.0 / np.log(2.0), MIN_EXPONENT), dtype=dtype),
-            powers,
-            series,
-            soft,
-            partial,
+        grid = Grid(b, h, w, Float)
+        scores = _candidate_scores(
+            grid,
+            flat(x, Float),
+            flat(y.to(dtype), Float),
+            flat(grad.to(dtype), Float),
+            c,
+            grid.load_broadcast(bins),
+            None if softness is None else grid.load_broadcast(softness),
+            Float(offsets),
+            min_bins,
         )
-    return torch.from_numpy(partial.reshape(b, h, len(offsets)).sum(axis=1).T.astype(dtype))
+        result = scores.torch().view(len(offsets), b).to(dtype)
+    return result
