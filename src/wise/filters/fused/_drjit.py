@@ -135,12 +135,24 @@ def as_tensor(array, shape: tuple[int, ...]) -> torch.Tensor:
 
 
 def to_torch(arrays, shape: tuple[int, ...]) -> torch.Tensor:
-    """Evaluated flat arrays of one picture channel each (``shape`` without the channel) stacked
-    on dimension 1: ``(B, len(arrays), H, W)``."""
+    """Flat arrays of one picture channel each (``shape`` = ``(B, H, W)``, without the channel)
+    as ``(B, len(arrays), H, W)``: written into one array by a Dr.Jit kernel (a copy on the
+    engine's threads into its cached memory, where ``torch.stack`` would fault in fresh pages)."""
     import drjit
+    from drjit.llvm import UInt32
 
-    drjit.sync_thread()  # kernels run asynchronously
-    return torch.stack([a.torch().view(shape) for a in arrays], dim=1)
+    if len(arrays) == 1:
+        return as_tensor(arrays[0], (shape[0], 1, *shape[1:]))
+    batch, height, width = shape
+    plane, channels = height * width, len(arrays)
+    lane = drjit.arange(UInt32, batch * plane)
+    picture, pixel = lane // drjit.opaque(UInt32, plane), lane % drjit.opaque(UInt32, plane)
+    target = drjit.empty(type(arrays[0]), batch * channels * plane)
+    for channel, array in enumerate(arrays):
+        index = (picture * channels + channel) * drjit.opaque(UInt32, plane) + pixel
+        drjit.scatter(target, array, index, mode=drjit.ReduceMode.Permute)
+    drjit.eval(target)
+    return as_tensor(target, (batch, channels, height, width))
 
 
 @contextmanager

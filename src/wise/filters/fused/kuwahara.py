@@ -34,7 +34,7 @@ from drjit.llvm import UInt32
 
 from wise.filters.fused import reduce_to
 from wise.filters.fused._drjit import flat, float_type, kernel_threads, to_torch
-from wise.filters.fused._lanes import Grid, minimum, runtime
+from wise.filters.fused._lanes import Grid, PackedGradient, minimum, runtime
 
 _SOFTPLUS_GROWTH_THRESHOLD = math.exp(20.0)
 """``exp`` of the input above which :func:`torch.nn.functional.softplus` returns its input (its
@@ -416,7 +416,7 @@ def _backward(inputs: _Inputs, layout: _Layout, plan: int, kept: list, grad, nee
         g_sums.append([(share * g_k - 2.0 * (value / total) * g_variance) / total for g_k, value in zip(g, sums[n])])
 
     # the taps' backward: d_t enters S_n linearly and Q_n through |d_t|^2
-    g_image = dr.zeros(Float, grid.batch * channels * grid.plane) if need_image else None
+    g_image = PackedGradient(grid, channels) if need_image else None
 
     def sector_taps(taps: list, turned: list, state: tuple) -> tuple[list, tuple]:
         g_major_x, g_major_y, g_minor_x, g_minor_y = state
@@ -426,15 +426,17 @@ def _backward(inputs: _Inputs, layout: _Layout, plan: int, kept: list, grad, nee
             for place, weight in places:
                 g_square = dr.fma(2.0 * weight, turned[place][channels], g_square)
             g_x, g_y = 0.0, 0.0
+            g_differences = []
             for k, (start, centre) in enumerate(zip(starts, inputs.centre)):
                 value, slope_x, slope_y = grid.sample_with_slopes(image, corners, start)
                 g_difference = g_square * (value - centre)
                 for place, weight in places:
                     g_difference = dr.fma(weight, turned[place][k], g_difference)
+                g_differences.append(g_difference)
                 g_x = dr.fma(g_difference, slope_x, g_x)
                 g_y = dr.fma(g_difference, slope_y, g_y)
-                if need_image:
-                    grid.scatter(g_image, g_difference, corners, start)
+            if need_image:
+                g_image.scatter(g_differences, corners)
             g_x = dr.select(corners.moves_x, g_x, 0.0)
             g_y = dr.select(corners.moves_y, g_y, 0.0)
             if need_major:
@@ -462,8 +464,9 @@ def _backward(inputs: _Inputs, layout: _Layout, plan: int, kept: list, grad, nee
             for n in range(sectors):
                 g_centre_k = g_centre_k - (layout.sector_weights[n] * g_sums[n][k] + 2.0 * sums[n][k] * g_squares[n])
             g_centre[k] = g_centre_k
-    outputs = [*g_centre, *axes, g_q if need_sharpness else None]
-    dr.eval(*(o for o in [g_image, *outputs] if o is not None))
+        g_image.add(g_centre, grid.pixel)
+    outputs = [*axes, g_q if need_sharpness else None]
+    dr.eval(*(o for o in [g_image.array if need_image else None, *outputs] if o is not None))
     return g_image, outputs
 
 
@@ -512,9 +515,9 @@ class AnisotropicKuwahara(torch.autograd.Function):
             inputs = _Inputs.of(image, major, minor, sharpness)
             grad_flat = flat(grad.to(image.dtype), inputs.grid.Float, (b, c, h, w))
             g_image, outputs = _backward(inputs, ctx.layout, ctx.plan, ctx.kept, grad_flat, needs)
-            g_centre, axes, g_q = outputs[:c], outputs[c : c + 4], outputs[c + 4]
+            axes, g_q = outputs[:4], outputs[4]
             if needs[0]:
-                g_image = g_image.torch().view(b, c, h, w) + to_torch(g_centre, (b, h, w))
+                g_image = g_image.torch((b, c, h, w))
             g_major = torch.stack([a.torch().view(b, h, w) for a in axes[:2]], dim=-1) if needs[1] else None
             g_minor = torch.stack([a.torch().view(b, h, w) for a in axes[2:]], dim=-1) if needs[2] else None
             g_sharpness = g_q.torch().view(b, 1, h, w) if needs[3] else None

@@ -20,7 +20,7 @@ from drjit.llvm import Int32
 
 from wise.filters.fused import reduce_to
 from wise.filters.fused._drjit import flat, float_type, kernel_threads, to_torch
-from wise.filters.fused._lanes import Grid
+from wise.filters.fused._lanes import Grid, PackedGradient
 
 _MOMENTS = 4
 """``2 g''``, ``2 g``, ``2 g'' u^2`` and ``2 g u^2`` summed over the samples."""
@@ -91,7 +91,7 @@ def _log_backward(inputs: _Inputs, grad_second_v, grad_gauss_v, grad_moments, ne
     g_second_v = [grid.load(grad_second_v, c, channels) for c in range(channels)]
     g_gauss_v = [grid.load(grad_gauss_v, c, channels) for c in range(channels)]
     g_second_sum, g_gauss_sum, g_second_u2, g_gauss_u2 = (grid.load(grad_moments, m, _MOMENTS) for m in range(4))
-    g_image = dr.zeros(Float, dr.width(inputs.pixels)) if need_image else None
+    g_image = PackedGradient(grid, channels) if need_image else None
     ux, uy, inverse = inputs.ux, inputs.uy, inputs.inverse
 
     def body(k, gauss, growth, g_ux, g_uy, g_step, g_inverse):
@@ -103,19 +103,21 @@ def _log_backward(inputs: _Inputs, grad_second_v, grad_gauss_v, grad_moments, ne
         g_second = 2.0 * g_second_sum + 2.0 * g_second_u2 * u_sq
         g_gauss = 2.0 * g_gauss_sum + 2.0 * g_gauss_u2 * u_sq
         g_offset_x, g_offset_y = Float(0.0), Float(0.0)
+        g_values = []
         for start, g_s, g_g in zip(inputs.starts, g_second_v, g_gauss_v):
             value_a, slope_xa, slope_ya = grid.sample_with_slopes(inputs.pixels, ahead, start)
             value_b, slope_xb, slope_yb = grid.sample_with_slopes(inputs.pixels, behind, start)
             g_second = dr.fma(g_s, value_a + value_b, g_second)
             g_gauss = dr.fma(g_g, value_a + value_b, g_gauss)
             g_both = g_s * second + g_g * gauss
-            if need_image:
-                grid.scatter(g_image, g_both, ahead, start)
-                grid.scatter(g_image, g_both, behind, start)
+            g_values.append(g_both)
             along_x = dr.select(ahead.moves_x, slope_xa, 0.0) - dr.select(behind.moves_x, slope_xb, 0.0)
             along_y = dr.select(ahead.moves_y, slope_ya, 0.0) - dr.select(behind.moves_y, slope_yb, 0.0)
             g_offset_x = dr.fma(g_both, along_x, g_offset_x)
             g_offset_y = dr.fma(g_both, along_y, g_offset_y)
+        if need_image:
+            g_image.scatter(g_values, ahead)
+            g_image.scatter(g_values, behind)
         # g'' = (u^2 - 1) g and g = exp(-u^2 / 2): back to u^2, then to u
         g_gauss_total = g_gauss + g_second * (u_sq - 1.0)
         g_u_sq = 2.0 * g_second_u2 * second + 2.0 * g_gauss_u2 * gauss + g_second * gauss - 0.5 * g_gauss_total * gauss
@@ -133,7 +135,7 @@ def _log_backward(inputs: _Inputs, grad_second_v, grad_gauss_v, grad_moments, ne
 
     state = (Int32(0), inputs.gauss, inputs.growth, *(Float(0.0) for _ in range(4)))
     _, _, _, *g_maps = dr.while_loop(state, lambda k, *_: inputs.going_on(k), body)
-    dr.eval(*g_maps, *([g_image] if need_image else []))
+    dr.eval(*g_maps, *([g_image.array] if need_image else []))
     return g_image, g_maps
 
 
@@ -170,7 +172,7 @@ class LogTaps(torch.autograd.Function):
             )
             g_direction = to_torch(g_maps[:2], (b, h, w))
             g_step, g_inverse = (to_torch([g], (b, h, w)) for g in g_maps[2:])
-            g_image = g_image.torch().view(b, c, h, w) if need_image else None
+            g_image = g_image.torch((b, c, h, w)) if need_image else None
         return (
             g_image,
             reduce_to(g_direction, direction.shape) if wanted[1] else None,

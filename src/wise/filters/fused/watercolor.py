@@ -28,7 +28,7 @@ import torch
 
 from wise.filters.fused import reduce_to
 from wise.filters.fused._drjit import flat, float_type, kernel_threads, to_torch
-from wise.filters.fused._lanes import Grid, runtime
+from wise.filters.fused._lanes import Grid, PackedGradient, runtime
 
 _UNROLLED_SAMPLES = 16
 """Wet-in-wet samples per side up to which the forward kernel unrolls its loop over them; more run
@@ -62,47 +62,6 @@ class _Map:
         elif self.width > 1:
             index += grid.column
         return dr.gather(grid.Float, self.array, index)
-
-
-_PACKET = 4
-"""Channels of the scattered image gradient added to a corner at once."""
-
-
-class _PackedGradient:
-    """The image's gradient as ``(B, H, W, G * 4)``: a pixel's channels side by side in ``G`` groups
-    of four (the last padded with zeros), added to with one four-wide scatter per group and corner."""
-
-    def __init__(self, grid: Grid, channels: int) -> None:
-        import drjit.llvm as backend
-
-        self.grid, self.channels = grid, channels
-        self.groups = -(-channels // _PACKET)
-        self.Packet = backend.Array4f64 if grid.Float is backend.Float64 else backend.Array4f
-        self.array = dr.zeros(grid.Float, grid.lanes * self.groups * _PACKET)
-
-    def scatter(self, values: list, corners) -> None:
-        """Add the channels' ``values`` to the four corners with the bilinear weights (the adjoint of
-        :meth:`Grid.sample`), into per-thread copies summed at the end."""
-        grid = self.grid
-        start = grid.picture * grid.runtime_plane
-        top, bottom = 1.0 - corners.fy, corners.fy
-        weighted = (
-            (top * (1.0 - corners.fx), corners.top_left),
-            (top * corners.fx, corners.top_right),
-            (bottom * (1.0 - corners.fx), corners.bottom_left),
-            (bottom * corners.fx, corners.bottom_right),
-        )
-        padded = list(values) + [0.0] * (self.groups * _PACKET - self.channels)
-        for weight, offset in weighted:
-            for group in range(self.groups):
-                packet = self.Packet(*(v * weight for v in padded[group * _PACKET : (group + 1) * _PACKET]))
-                index = (start + offset) * self.groups + group
-                dr.scatter_add(self.array, packet, index, mode=dr.ReduceMode.Expand)
-
-    def torch(self, shape: tuple[int, int, int, int]) -> torch.Tensor:
-        """The evaluated gradient as a ``(B, C, H, W)`` tensor."""
-        b, c, h, w = shape
-        return self.array.torch().view(b, h, w, -1)[..., :c].permute(0, 3, 1, 2)
 
 
 def _along(moves, value):
@@ -161,7 +120,7 @@ def _wet_backward(
     image, step: _Map, edges: _Map, weights: Sequence[float], grid: Grid, channels: int, grad, need_image
 ):
     """Gradients of :func:`_wet_forward`: the image's samples scattered into a
-    :class:`_PackedGradient` (if ``need_image``) and its centre term per lane, the step's
+    :class:`PackedGradient` (if ``need_image``) and its centre term per lane, the step's
     ``sum_j j w_j sum_c g_c e / W (dC/dx(p + j s) - dC/dx(p - j s))`` (zero along a clamped
     coordinate) and the edges' ``sum_c g_c (bled_c - C_c)``."""
     Float = grid.Float
@@ -171,7 +130,7 @@ def _wet_backward(
     inverse_total = 1.0 / (weights[0] + 2.0 * sum(weights[1:]))
     g_out = [grid.load(grad, c, channels) for c in range(channels)]
     g_sums = [g * blend * inverse_total for g in g_out]
-    g_image = _PackedGradient(grid, channels) if need_image else None
+    g_image = PackedGradient(grid, channels) if need_image else None
 
     def sample_pair(j, weight, g_sx, g_sy, *sums):
         ahead = grid.locate(dr.fma(j, sx, grid.x), dr.fma(j, sy, grid.y))
@@ -297,7 +256,7 @@ def _gaps_backward(
 ):
     """Gradients of :func:`_gaps_forward`. With ``q = dL/dC_other / n`` (``n`` the norm):
     ``dL/dA = q |A|^2 + 2 A (q.A - (q.A |A|^2 + q.B |B|^2) / n)`` (``B`` alike); ``A`` and ``B``
-    pass their gradient to the samples (scattered into a :class:`_PackedGradient` if ``need_image``, and along
+    pass their gradient to the samples (scattered into a :class:`PackedGradient` if ``need_image``, and along
     ``u`` to the direction) and minus it to the centre, which is returned per lane."""
     Float = grid.Float
     centre = [grid.load(image, c, channels) for c in range(channels)]
@@ -338,7 +297,7 @@ def _gaps_backward(
         _, slope_x, slope_y = grid.sample_with_slopes(image, sides.behind_corners, start)
         behind_x = dr.fma(g_behind, slope_x, behind_x)
         behind_y = dr.fma(g_behind, slope_y, behind_y)
-    g_image = _PackedGradient(grid, channels) if need_image else None
+    g_image = PackedGradient(grid, channels) if need_image else None
     if need_image:
         g_image.scatter(g_aheads, sides.ahead_corners)
         g_image.scatter(g_behinds, sides.behind_corners)
