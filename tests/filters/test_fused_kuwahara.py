@@ -113,6 +113,7 @@ def test_gradcheck() -> None:
             lambda i, t, r, q, a: anisotropic_kuwahara(i, t, r, q, a, scale=1.0, sectors=4, samples_per_sector=2),
             (image, tensor, radius, sharpness, strength),
             eps=1e-6,
+            nondet_tol=1e-12,
             atol=1e-5,
             rtol=1e-3,
         )

@@ -57,6 +57,7 @@ def test_wet_in_wet_gradcheck() -> None:
             lambda i, d, e, a: wet_in_wet(i, d, e, a, 0.5, scale=1.0, samples=3),
             (image, direction, edges, amount),
             eps=1e-6,
+            nondet_tol=1e-12,
             atol=1e-6,
         )
 
@@ -126,6 +127,7 @@ def test_gaps_overlaps_gradcheck() -> None:
             lambda i, e, d, a: gaps_overlaps(i, e, d, a, 0.6, scale=1.0, width=1.7),
             (image, edges, direction, amount),
             eps=1e-6,
+            nondet_tol=1e-12,
             atol=1e-6,
         )
 
