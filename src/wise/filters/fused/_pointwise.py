@@ -30,6 +30,19 @@ def _ad_type(dtype: torch.dtype):
     return backend.Float64 if dtype == torch.float64 else backend.Float32
 
 
+_ALIGNMENT = 64
+"""Bytes to which a plane's memory is aligned: Dr.Jit's code for reading an array depends on the
+alignment of its address, so planes at other offsets would compile the kernel again."""
+
+
+def _plane(value: torch.Tensor, Float):
+    """A contiguous tensor as a flat array sharing its memory, copied where it is not aligned."""
+    value = value.contiguous().view(-1)
+    if value.data_ptr() % _ALIGNMENT:
+        value = value.clone()
+    return Float(value)
+
+
 def _planes(tensor: torch.Tensor, size: tuple[int, int, int], Float) -> Planes:
     """A tensor's channels as flat arrays over ``size`` (B, H, W) pixels: a single value where the
     tensor holds one for all pixels, else one per pixel (shared with the tensor where contiguous)."""
@@ -38,7 +51,7 @@ def _planes(tensor: torch.Tensor, size: tuple[int, int, int], Float) -> Planes:
     if value.shape[0] == 1 and value.shape[-1] * value.shape[-2] == 1:
         return [Float(value[0, c].reshape(1)) for c in range(value.shape[1])]
     value = value.expand(batch, -1, height, width)
-    return [Float(value[:, c].contiguous().view(-1)) for c in range(value.shape[1])]
+    return [_plane(value[:, c], Float) for c in range(value.shape[1])]
 
 
 def _tensor(planes: Sequence[object], size: tuple[int, int, int]) -> torch.Tensor:
@@ -76,7 +89,7 @@ class _Pointwise(torch.autograd.Function):
             outputs = list(ctx.function(*planes))
             for c, output in enumerate(outputs):
                 if dr.grad_enabled(output):
-                    dr.set_grad(output, Float(grad_output[:, c].contiguous().view(-1)))
+                    dr.set_grad(output, _plane(grad_output[:, c], Float))
             dr.enqueue(dr.ADMode.Backward, *outputs)
             dr.traverse(dr.ADMode.Backward)
             grads = [[dr.grad(p) for p in x_planes] if want else None for x_planes, want in zip(planes, wanted)]
