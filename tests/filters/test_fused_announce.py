@@ -34,6 +34,7 @@ def test_the_first_use_of_cold_kernels_is_announced_once(tmp_path) -> None:
     cold = _run(tmp_path)
     assert cold.count("NOTICE") == 1 and fused.COMPILE_NOTICE in cold
     assert cold.strip().endswith("done")
+    assert "NOTICE" not in _run(tmp_path)  # the next command loads what the first compiled
 
 
 def test_kernels_compiled_ahead_are_not_announced(tmp_path, monkeypatch) -> None:

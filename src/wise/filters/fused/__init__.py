@@ -21,6 +21,7 @@ PyTorch path. Kernels run on as many threads as PyTorch uses, one at a time in a
 
 from __future__ import annotations
 
+import atexit
 import hashlib
 import os
 from pathlib import Path
@@ -72,7 +73,8 @@ COMPILE_NOTICE = (
     "compiling the CPU kernels on first use (a few seconds per effect, once: they are cached on disk; "
     "`python -m wise.effects.compile` compiles them ahead)"
 )
-"""What :func:`announce_compilation` prints when the kernels of this version were never compiled here."""
+"""What :func:`announce_compilation` prints when the kernels of this version were never compiled here
+(not ahead by :mod:`wise.effects.compile`, nor by an earlier command)."""
 
 _announce: Callable[[str], None] | None = None
 
@@ -105,3 +107,13 @@ def _announce_if_cold() -> None:
     announce, _announce = _announce, None
     if announce is not None and not warm_marker().exists():
         announce(COMPILE_NOTICE)
+        atexit.register(_mark_warm)  # the next command loads what this one compiled
+
+
+def _mark_warm() -> None:
+    try:
+        marker = warm_marker()
+        marker.parent.mkdir(parents=True, exist_ok=True)
+        marker.touch()
+    except OSError:  # a read-only home: the notice shows again, nothing worse
+        pass
