@@ -95,3 +95,15 @@ def test_a_new_picture_size_or_tile_origin_compiles_no_new_kernel() -> None:
     finally:
         dr.set_flag(dr.JitFlag.KernelHistory, False)
     assert later and all(kernel["cache_hit"] for kernel in later)
+
+
+def test_the_kernels_take_cpu_tensors_of_float32_and_float64_only() -> None:
+    import torch
+
+    from wise.filters import fused
+
+    # other devices (CUDA included) and dtypes run on the PyTorch path
+    assert not fused.enabled(torch.zeros(1, device="meta"))
+    assert not fused.enabled(torch.zeros(1, dtype=torch.float16))
+    assert not fused.enabled(torch.zeros(1), torch.zeros(1, dtype=torch.float64))
+    assert fused.enabled(torch.zeros(1, dtype=torch.float64)) == llvm_backend()
