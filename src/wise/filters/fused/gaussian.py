@@ -48,13 +48,20 @@ class _Line:
 
 def _correlate(image, taps, radius, line: _Line, Float):
     """``sum_k taps[k] image[p + k - radius]`` along the line, borders replicated: a loop over the
-    taps, whose count and weights the kernel reads (one kernel serves every sigma and size)."""
+    taps, whose count and weights the kernel reads (one kernel serves every sigma and size). The
+    kernel is symmetric, so each step adds the two pairs of pixels ``k`` and ``k + 1`` away on
+    both sides with one weight each (``taps`` holds a zero after its end for an odd last pair)."""
 
-    def add_tap(k, total):
-        weight = dr.gather(Float, taps, UInt32(k))
-        return k + 1, dr.fma(weight, dr.gather(Float, image, line.clamped(k - radius)), total)
+    def pair(k):
+        weight = dr.gather(Float, taps, UInt32(radius + k))
+        before = dr.gather(Float, image, line.clamped(-k))
+        return weight * (before + dr.gather(Float, image, line.clamped(k)))
 
-    _, total = dr.while_loop((Int32(0), Float(0.0)), lambda k, total: k <= 2 * radius, add_tap)
+    def add_pairs(k, total):
+        return k + 2, total + pair(k) + pair(k + 1)
+
+    centre = dr.gather(Float, taps, UInt32(radius)) * dr.gather(Float, image, line.clamped(0))
+    _, total = dr.while_loop((Int32(1), centre), lambda k, total: k <= radius, add_pairs)
     return total
 
 
@@ -86,7 +93,7 @@ def correlate_axis(image: torch.Tensor, kernel: torch.Tensor, axis: int, adjoint
         grid = Grid(b * c, h, w, Float)
         line = _Line(grid, axis)
         # the taps are data of the kernel, not constants of its code
-        weights, opaque_radius = dr.opaque(Float(taps)), runtime(Int32, radius)
+        weights, opaque_radius = dr.opaque(Float(taps + [0.0])), runtime(Int32, radius)
         pixels = flat(image, Float)
         if adjoint:
             # at an end of the line, the tap at distance d also takes the gradient of the taps
