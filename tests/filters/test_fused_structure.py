@@ -40,3 +40,13 @@ def test_the_fused_sobel_runs_only_when_asked(monkeypatch: pytest.MonkeyPatch) -
         with kernels(path):
             structure_tensor(torch.rand(1, 1, 8, 8), 0.6, scale=1.0)
     assert calls == [1]
+
+
+@pytest.mark.parametrize("dtype, rtol", [(torch.float64, 1e-9), (torch.float32, 2e-5)])
+def test_edge_tangent_flow_matches_torch(dtype: torch.dtype, rtol: float) -> None:
+    from wise.filters.structure import edge_tangent_flow
+
+    tensor = rand(2, 3, 9, 11, low=-1.0, high=1.0).detach()
+    tensor[:, 1, 0, :4] = 0.0  # isotropic: the direction rests on the epsilon
+    tensor[:, 0, 0, :4] = tensor[:, 2, 0, :4]
+    assert_paths_agree(edge_tangent_flow, [tensor.to(dtype).requires_grad_()], rtol=rtol)

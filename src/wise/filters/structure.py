@@ -125,6 +125,10 @@ def edge_tangent_flow(tensor: torch.Tensor) -> torch.Tensor:
         Where the tensor vanishes the direction is arbitrary but finite.
     """
     check_image(tensor, name="structure tensor", channels=3)
+    if fused.enabled(tensor):
+        from wise.filters.fused.structure import edge_tangent_flow as fused_flow
+
+        return fused_flow(tensor, _ATAN_EPS)
     xx, xy, yy = tensor.unbind(dim=1)
     angle = 0.5 * torch.atan2(-2.0 * xy + _ATAN_EPS, yy - xx)
     return torch.stack((torch.cos(angle), torch.sin(angle)), dim=1)

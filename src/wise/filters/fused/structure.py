@@ -158,3 +158,16 @@ class StructureTensor(torch.autograd.Function):
             reduce_to(g_distance, distance.shape) if need_distance else None,
             None,
         )
+
+
+def edge_tangent_flow(tensor: torch.Tensor, epsilon: float) -> torch.Tensor:
+    """The fused :func:`wise.filters.structure.edge_tangent_flow`: the minor eigenvector of the
+    structure tensor ``(B, 3, H, W)`` as ``(B, 2, H, W)``, one pass per pixel (autodiff by Dr.Jit)."""
+    from wise.filters.fused import _pointwise
+
+    def planes(components):
+        xx, xy, yy = components
+        angle = 0.5 * dr.atan2(-2.0 * xy + epsilon, yy - xx)
+        return dr.cos(angle), dr.sin(angle)
+
+    return _pointwise.apply(planes, tensor)
