@@ -6,9 +6,14 @@ import os
 from contextlib import contextmanager
 from typing import Callable, Iterator, Sequence
 
+import pytest
 import torch
 
 from wise.filters.fused import ENVIRONMENT_VARIABLE
+from wise.filters.fused._drjit import llvm_backend
+
+needs_kernels = pytest.mark.skipif(not llvm_backend(), reason="Dr.Jit's CPU backend does not start here (no LLVM)")
+"""For tests of the fused kernels themselves: without them both paths would be PyTorch's."""
 
 
 @contextmanager

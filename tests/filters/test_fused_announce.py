@@ -6,12 +6,10 @@ import os
 import subprocess
 import sys
 
-import pytest
-
+from tests.filters.paths import needs_kernels
 from wise.filters import fused
-from wise.filters.fused._drjit import llvm_backend
 
-pytestmark = pytest.mark.skipif(not llvm_backend(), reason="Dr.Jit's CPU backend does not start here")
+pytestmark = needs_kernels
 
 PROGRAM = """
 import torch

@@ -5,12 +5,11 @@ import torch
 from torch.autograd import gradcheck
 
 from tests.filters.helpers import rand
-from tests.filters.paths import assert_paths_agree, kernels
+from tests.filters.paths import assert_paths_agree, kernels, needs_kernels
 from wise.filters.clamp import inward_gradients
 from wise.filters.color import adjust_color, lab_to_rgb, linear_to_srgb, rgb_to_lab, srgb_to_linear
-from wise.filters.fused._drjit import llvm_backend
 
-pytestmark = pytest.mark.skipif(not llvm_backend(), reason="Dr.Jit's CPU backend does not start here")
+pytestmark = needs_kernels
 
 
 def _lab(seed: int = 0) -> torch.Tensor:

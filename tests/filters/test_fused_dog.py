@@ -5,8 +5,10 @@ import torch
 from torch.autograd import gradcheck
 
 from tests.filters.helpers import rand, unit, unit_field
-from tests.filters.paths import assert_paths_agree, kernels
+from tests.filters.paths import assert_paths_agree, kernels, needs_kernels
 from wise.filters.dog import flow_dog, flow_smoothing
+
+pytestmark = needs_kernels
 
 
 def smooth_field(b: int, h: int, w: int, dtype=torch.float64) -> torch.Tensor:

@@ -5,8 +5,10 @@ import torch
 from torch.autograd import gradcheck
 
 from tests.filters.helpers import rand
-from tests.filters.paths import assert_paths_agree, kernels
+from tests.filters.paths import assert_paths_agree, kernels, needs_kernels
 from wise.filters.gaussian import gaussian_blur
+
+pytestmark = needs_kernels
 
 
 @pytest.mark.parametrize("sigma", [0.3, 1.5, 7.0])

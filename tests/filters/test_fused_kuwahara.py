@@ -5,9 +5,11 @@ import torch
 from torch.autograd import gradcheck
 
 from tests.filters.helpers import rand
-from tests.filters.paths import assert_paths_agree, kernels
+from tests.filters.paths import assert_paths_agree, kernels, needs_kernels
 from wise.filters.kuwahara import _sample_layout, anisotropic_kuwahara
 from wise.filters.structure import smoothed_structure_tensor
+
+pytestmark = needs_kernels
 
 FLOAT64_RTOL = 1e-9
 FLOAT32_RTOL = 1e-5

@@ -5,8 +5,10 @@ import torch
 from torch.autograd import gradcheck
 
 from tests.filters.helpers import rand, unit, unit_field
-from tests.filters.paths import assert_paths_agree, kernels
+from tests.filters.paths import assert_paths_agree, kernels, needs_kernels
 from wise.filters.log import flow_log
+
+pytestmark = needs_kernels
 
 
 @pytest.mark.parametrize("per_pixel", [False, True])

@@ -3,11 +3,10 @@
 import pytest
 import torch
 
-from tests.filters.paths import kernels
-from wise.filters.fused._drjit import llvm_backend
+from tests.filters.paths import kernels, needs_kernels
 from wise.filters.noise import paper_texture, value_noise
 
-pytestmark = pytest.mark.skipif(not llvm_backend(), reason="Dr.Jit's CPU backend does not start here")
+pytestmark = needs_kernels
 
 
 def _both(render) -> tuple[torch.Tensor, torch.Tensor]:

@@ -6,8 +6,10 @@ import pytest
 import torch
 
 from tests.filters.helpers import rand
-from tests.filters.paths import assert_paths_agree, kernels
+from tests.filters.paths import assert_paths_agree, kernels, needs_kernels
 from wise.filters.quantize import MIN_BINS, quantize
+
+pytestmark = needs_kernels
 
 quantize_module = importlib.import_module("wise.filters.quantize")
 

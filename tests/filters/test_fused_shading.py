@@ -5,8 +5,10 @@ import torch
 from torch.autograd import gradcheck
 
 from tests.filters.helpers import rand
-from tests.filters.paths import assert_paths_agree, kernels
+from tests.filters.paths import assert_paths_agree, kernels, needs_kernels
 from wise.filters.shading import bump_phong
+
+pytestmark = needs_kernels
 
 LIGHT = (0.0, -1.0, 1.5)
 

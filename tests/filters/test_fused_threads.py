@@ -5,12 +5,11 @@ from concurrent.futures import ThreadPoolExecutor
 import pytest
 import torch
 
-from tests.filters.paths import kernels
+from tests.filters.paths import kernels, needs_kernels
 from wise.filters.bilateral import bilateral_pass
-from wise.filters.fused._drjit import llvm_backend
 from wise.filters.gaussian import gaussian_blur
 
-pytestmark = pytest.mark.skipif(not llvm_backend(), reason="Dr.Jit's CPU backend does not start here")
+pytestmark = needs_kernels
 
 
 @pytest.mark.parametrize("threads", [1, 2])

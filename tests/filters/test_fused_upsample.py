@@ -5,8 +5,10 @@ import torch
 from torch.autograd import gradcheck
 
 from tests.filters.helpers import rand
-from tests.filters.paths import assert_paths_agree, kernels
+from tests.filters.paths import assert_paths_agree, kernels, needs_kernels
 from wise.filters.upsample import joint_bilateral_upsample
+
+pytestmark = needs_kernels
 
 
 @pytest.mark.parametrize("radius", [1, 2])
