@@ -107,3 +107,11 @@ def test_the_kernels_take_cpu_tensors_of_float32_and_float64_only() -> None:
     assert not fused.enabled(torch.zeros(1, dtype=torch.float16))
     assert not fused.enabled(torch.zeros(1), torch.zeros(1, dtype=torch.float64))
     assert fused.enabled(torch.zeros(1, dtype=torch.float64)) == llvm_backend()
+
+
+def test_a_library_named_older_than_15_is_not_loaded() -> None:
+    from wise.filters.fused._drjit import _too_old
+
+    assert _too_old("/usr/lib/x86_64-linux-gnu/libLLVM-14.so.1") and _too_old("/usr/lib/libLLVM.so.13.0")
+    assert not _too_old("/usr/lib/x86_64-linux-gnu/libLLVM-15.so") and not _too_old("/usr/lib/libLLVM.so.19.1")
+    assert not _too_old("/opt/llvm/lib/libLLVM.dylib")  # no version in the name: Dr.Jit is asked

@@ -48,9 +48,23 @@ _lock = threading.Lock()
 _state: dict[str, bool] = {}
 
 
+MIN_LLVM = 15
+"""The oldest LLVM Dr.Jit's CPU backend works with."""
+
+
 def _version(path: str) -> tuple[int, ...]:
     numbers = re.findall(r"\d+", os.path.basename(path))
     return tuple(int(n) for n in numbers) or (0,)
+
+
+def _too_old(path: str) -> bool:
+    """Whether a library's name says it is an LLVM older than :data:`MIN_LLVM` (a name without a
+    version says nothing)."""
+    version = _version(path)
+    return version != (0,) and version[0] < MIN_LLVM
+
+
+_TOO_OLD = f" (the LLVM found is too old: Dr.Jit needs {MIN_LLVM} or newer)"
 
 
 def find_libllvm() -> str | None:
@@ -81,14 +95,18 @@ def _start_llvm() -> bool:
         library = find_libllvm()
         if library is not None:
             os.environ[LIBLLVM_VARIABLE] = library
+    if _too_old(os.environ.get(LIBLLVM_VARIABLE, "")):
+        # not handed to Dr.Jit at all: it would only refuse it (and a refused library has been
+        # seen to leave the process hanging at exit under load)
+        print(f"wise: {MISSING_LLVM_NOTICE}{_TOO_OLD}", file=sys.stderr, flush=True)
+        return False
     with _stderr_of_native_code() as messages:
         import drjit
 
         working = bool(drjit.has_backend(drjit.JitBackend.LLVM))
     if not working:
-        reason = next((line for line in reversed(messages) if "too old" in line), "")
-        detail = " (the LLVM found is too old: Dr.Jit needs 15 or newer)" if reason else ""
-        print(f"wise: {MISSING_LLVM_NOTICE}{detail}", file=sys.stderr, flush=True)
+        too_old = any("too old" in line for line in messages)
+        print(f"wise: {MISSING_LLVM_NOTICE}{_TOO_OLD if too_old else ''}", file=sys.stderr, flush=True)
     return working
 
 
