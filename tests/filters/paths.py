@@ -54,3 +54,25 @@ def assert_paths_agree(
         scale = float(a.abs().max())
         error = float((a - b).abs().max())
         assert error <= rtol * scale + atol, f"{name}: max |torch - fused| {error:.3g}, scale {scale:.3g}"
+
+
+def image_gradients(loss: Callable[[torch.Tensor], torch.Tensor], image: torch.Tensor, threads: int, runs: int = 2):
+    """The gradient of ``loss(image)`` for ``image`` on the fused path, ``runs`` times, with PyTorch
+    (and so the kernels) on ``threads`` threads."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    try:
+        with kernels("fused"):
+            return [torch.autograd.grad(loss(image), image)[0] for _ in range(runs)]
+    finally:
+        torch.set_num_threads(before)
+
+
+def assert_scatters_repeat(loss: Callable[[torch.Tensor], torch.Tensor], image: torch.Tensor) -> None:
+    """A backward that scatters the image's gradient into per-thread copies: identical runs on one
+    thread; on two, within rounding of one thread's (the copies are summed in the order the
+    threads took the work, which may change the last bits)."""
+    first, second = image_gradients(loss, image, threads=1)
+    assert torch.equal(first, second)
+    for parallel in image_gradients(loss, image, threads=2):
+        assert torch.allclose(parallel, first, rtol=1e-5, atol=1e-5 * float(first.abs().max()))

@@ -5,7 +5,7 @@ import torch
 from torch.autograd import gradcheck
 
 from tests.filters.helpers import rand, unit, unit_field
-from tests.filters.paths import assert_paths_agree, kernels, needs_kernels
+from tests.filters.paths import assert_paths_agree, assert_scatters_repeat, kernels, needs_kernels
 from wise.filters.bilateral import bilateral, bilateral_pass, oriented_bilateral
 
 pytestmark = needs_kernels
@@ -65,32 +65,10 @@ def test_bilateral_gradcheck() -> None:
         )
 
 
-def _image_gradients(threads: int, runs: int = 2) -> list[torch.Tensor]:
+def test_fused_backward_repeats_on_one_thread_and_within_rounding_on_two() -> None:
     image = rand(2, 3, 24, 20, high=50.0).detach().float().requires_grad_()
     direction = unit_field(2, 24, 20).detach().float()
-    before = torch.get_num_threads()
-    torch.set_num_threads(threads)
-    try:
-        with kernels("fused"):
-            return [
-                torch.autograd.grad(bilateral_pass(image, direction, 3.0, 8.0, scale=1.0).square().sum(), image)[0]
-                for _ in range(runs)
-            ]
-    finally:
-        torch.set_num_threads(before)
-
-
-def test_fused_backward_is_deterministic_on_one_thread() -> None:
-    first, second = _image_gradients(threads=1)
-    assert torch.equal(first, second)
-
-
-def test_fused_backward_on_two_threads_differs_at_most_by_rounding() -> None:
-    # each thread scatters the image's gradient into a copy of its own; the copies are summed in
-    # the order the threads took the work, which may change the last bits
-    (single,) = _image_gradients(threads=1, runs=1)
-    for parallel in _image_gradients(threads=2):
-        assert torch.allclose(parallel, single, rtol=1e-5, atol=1e-5 * float(single.abs().max()))
+    assert_scatters_repeat(lambda i: bilateral_pass(i, direction, 3.0, 8.0, scale=1.0).square().sum(), image)
 
 
 def test_the_fused_kernel_runs_only_when_asked(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -5,7 +5,7 @@ import torch
 from torch.autograd import gradcheck
 
 from tests.filters.helpers import rand
-from tests.filters.paths import assert_paths_agree, kernels, needs_kernels
+from tests.filters.paths import assert_paths_agree, assert_scatters_repeat, kernels, needs_kernels
 from wise.filters.kuwahara import _sample_layout, anisotropic_kuwahara
 from wise.filters.structure import smoothed_structure_tensor
 
@@ -133,32 +133,10 @@ def test_without_grad_the_same_output() -> None:
     assert torch.equal(recorded.detach(), unrecorded)
 
 
-def _image_gradients(threads: int, runs: int = 2) -> list[torch.Tensor]:
+def test_backward_repeats_on_one_thread_and_within_rounding_on_two() -> None:
     image = rand(2, 3, 12, 12, seed=18)
     radius = rand(2, 1, 12, 12, low=1.0, high=5.0, seed=19)
-    before = torch.get_num_threads()
-    torch.set_num_threads(threads)
-    try:
-        with kernels("fused"):
-            return [
-                torch.autograd.grad(anisotropic_kuwahara(image, _tensor(image), radius).sum(), image)[0]
-                for _ in range(runs)
-            ]
-    finally:
-        torch.set_num_threads(before)
-
-
-def test_backward_is_deterministic_on_one_thread() -> None:
-    first, second = _image_gradients(threads=1)
-    assert torch.equal(first, second)
-
-
-def test_backward_on_two_threads_differs_at_most_by_rounding() -> None:
-    # each thread scatters the image's gradient into a copy of its own; the copies are summed in
-    # the order the threads took the work, which may change the last bits
-    (single,) = _image_gradients(threads=1, runs=1)
-    for parallel in _image_gradients(threads=2):
-        assert torch.allclose(parallel, single, rtol=1e-5, atol=1e-5 * float(single.abs().max()))
+    assert_scatters_repeat(lambda i: anisotropic_kuwahara(i, _tensor(i), radius).sum(), image)
 
 
 def test_the_fused_kernel_runs_only_when_asked(monkeypatch: pytest.MonkeyPatch) -> None:
