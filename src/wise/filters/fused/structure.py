@@ -167,7 +167,15 @@ def edge_tangent_flow(tensor: torch.Tensor, epsilon: float) -> torch.Tensor:
 
     def planes(components):
         xx, xy, yy = components
-        angle = 0.5 * dr.atan2(-2.0 * xy + epsilon, yy - xx)
-        return dr.cos(angle), dr.sin(angle)
+        # (cos, sin) of half the angle of (x, y) = (yy - xx, epsilon - 2 xy), without atan2 (whose
+        # Dr.Jit code selects no instruction on LLVM 15): (r + x, y) and sign(y) (y, r - x) both
+        # point along it; each is taken where its length is at least r / sqrt(2)
+        x, y = yy - xx, epsilon - 2.0 * xy
+        r = dr.sqrt(x * x + y * y)
+        right = x >= 0.0
+        u = dr.select(right, r + x, dr.select(y >= 0.0, y, -y))
+        v = dr.select(right, y, dr.select(y >= 0.0, r - x, x - r))
+        length = dr.sqrt(u * u + v * v)
+        return u / length, v / length
 
     return _pointwise.apply(planes, tensor)
