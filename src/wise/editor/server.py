@@ -6,6 +6,7 @@ makes a random access token, which the URL it prints carries (see :mod:`wise.edi
 
 from __future__ import annotations
 
+import asyncio
 import ipaddress
 import logging
 import secrets
@@ -121,11 +122,23 @@ def serve(session: EditorSession, host: str = LOOPBACK, port: int = 8000, out: T
             "(its token) can use the editor",
             file=out,
         )
-    first, *others = urls(host, port, token)
-    print(f"wise editor at {first} (Ctrl-C stops it)", file=out)
-    for url in others:
-        print(f"  or {url}", file=out)
-    out.flush()
     app = create_app(session, access=access_for(host, port, token))
     _log_to(sys.stderr)
-    uvicorn.run(app, host=host, port=port, log_level="warning")
+    server = uvicorn.Server(uvicorn.Config(app, host=host, port=port, log_level="warning"))
+
+    async def serve_and_announce() -> None:
+        # the addresses are printed once the server listens and Ctrl-C is its own to handle
+        serving = asyncio.ensure_future(server.serve())
+        while not (server.started or serving.done()):
+            await asyncio.sleep(0.02)
+        if server.started:
+            first, *others = urls(host, port, token)
+            print(f"wise editor at {first} (Ctrl-C stops it)", file=out)
+            for url in others:
+                print(f"  or {url}", file=out)
+            out.flush()
+        await serving
+
+    asyncio.run(serve_and_announce())
+    if not server.started:
+        raise WiseError(f"the editor could not listen on {host} port {port}; try another --port")
