@@ -17,7 +17,7 @@ from wise.filters import fused
 from wise.filters.gaussian import gaussian_blur
 fused.announce_compilation(lambda line: print("NOTICE", line))
 for size in (9, 12):
-    gaussian_blur(torch.rand(1, 1, size, size), 1.0, scale=1.0)
+    gaussian_blur(torch.rand(1, 1, size, size), torch.full((1, 1, size, size), 1.0), scale=1.0)
 print("done")
 """
 

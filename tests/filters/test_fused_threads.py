@@ -20,7 +20,7 @@ def test_a_kernel_runs_on_pytorchs_thread_count_and_leaves_it(threads: int) -> N
     torch.set_num_threads(threads)
     try:
         with kernels("fused"):
-            gaussian_blur(torch.rand(1, 1, 16, 16), 1.0, scale=1.0)
+            gaussian_blur(torch.rand(1, 1, 16, 16), torch.full((1, 1, 16, 16), 1.0), scale=1.0)  # a Dr.Jit kernel
         assert torch.get_num_threads() == threads
         assert dr.thread_count() == threads
     finally:

@@ -1,11 +1,8 @@
-"""Fused kernels of :class:`wise.filters.gaussian._FixedBlurAxis` and
-:func:`wise.filters.gaussian._blur_axis_varying`: one axis of a Gaussian with replicated
-borders, forward and adjoint, in Dr.Jit.
+"""Fused kernel of :func:`wise.filters.gaussian._blur_axis_varying`: one axis of a Gaussian
+with a per-pixel sigma and replicated borders, forward and adjoint, in Dr.Jit (the fixed blur
+is faster as banded matrix products, :mod:`wise.filters.banded`).
 
-- Fixed: ``out_n = sum_k w_k v_clamp(n + k - r)`` with a symmetric kernel ``w`` of ``2r + 1``
-  taps; its adjoint is the same correlation of the gradient with zeros beyond the line, plus,
-  at the first and last pixel of a line, the gradient that fell on the replicated border.
-- Varying: ``out_n = sum_k w_k v_clamp(n + k) / sum_k w_k`` with ``w_k = exp(-k^2 / (2 sigma_n^2))``
+- ``out_n = sum_k w_k v_clamp(n + k) / sum_k w_k`` with ``w_k = exp(-k^2 / (2 sigma_n^2))``
   for ``|k| <= 1`` or ``|k| <= support * sigma_n`` (and ``|k| <= radius``), the weights taken by
   the recurrence ``w_k = w_(k-1) * w_1 * (w_1^2)^(k-1)``; backward scatters the image's gradient
   along the line and gives ``g_sigma = sum_c g_c / (N sigma^3) * sum_k k^2 w_k (v_(n+k) - out)``.
@@ -21,7 +18,7 @@ import torch
 from drjit.llvm import Int32, UInt32
 
 from wise.filters.fused import reduce_to
-from wise.filters.fused._drjit import as_tensor, flat, float_type, kernel_threads, to_torch
+from wise.filters.fused._drjit import flat, float_type, kernel_threads, to_torch
 from wise.filters.fused._lanes import Grid, runtime
 
 
@@ -44,81 +41,6 @@ class _Line:
     def clamped(self, offset):
         """The flat offset of the pixel ``offset`` away along the line, clamped to the line."""
         return self.index(dr.clip(self.position + offset, 0, self.size - 1))
-
-
-def _correlate(image, taps, radius, line: _Line, Float):
-    """``sum_k taps[k] image[p + k - radius]`` along the line, borders replicated: a loop over the
-    taps, whose count and weights the kernel reads (one kernel serves every sigma and size). The
-    kernel is symmetric, so each step adds the two pairs of pixels ``k`` and ``k + 1`` away on
-    both sides with one weight each (``taps`` holds a zero after its end for an odd last pair)."""
-
-    def pair(k):
-        weight = dr.gather(Float, taps, UInt32(radius + k))
-        before = dr.gather(Float, image, line.clamped(-k))
-        return weight * (before + dr.gather(Float, image, line.clamped(k)))
-
-    def add_pairs(k, total):
-        return k + 2, total + pair(k) + pair(k + 1)
-
-    centre = dr.gather(Float, taps, UInt32(radius)) * dr.gather(Float, image, line.clamped(0))
-    _, total = dr.while_loop((Int32(1), centre), lambda k, total: k <= radius, add_pairs)
-    return total
-
-
-def _correlate_adjoint(grad, taps, border, radius, line: _Line, Float):
-    at_border = (line.position == 0) | (line.position == line.size - 1)
-
-    def add_tap(k, total):
-        other = line.position + (k - radius)
-        inside = (other >= 0) & (other < line.size)
-        value = dr.gather(Float, grad, line.index(dr.select(inside, other, 0)), active=inside)
-        weight = dr.select(at_border, dr.gather(Float, border, UInt32(k)), dr.gather(Float, taps, UInt32(k)))
-        return k + 1, dr.fma(weight, value, total)
-
-    _, total = dr.while_loop((Int32(0), Float(0.0)), lambda k, total: k <= 2 * radius, add_tap)
-    return total
-
-
-def correlate_axis(image: torch.Tensor, kernel: torch.Tensor, axis: int, adjoint: bool = False) -> torch.Tensor:
-    """``kernel`` (odd length, symmetric) correlated with ``image`` ``(B, C, H, W)`` along
-    ``axis`` (3: x, 2: y), borders replicated; with ``adjoint`` the transpose of that map."""
-    b, c, h, w = image.shape
-    taps = kernel.to(image.dtype).tolist()
-    size = image.shape[axis]
-    if adjoint and size == 1:  # both ends of the line are the one pixel: it reads every tap
-        return image * sum(taps)
-    radius = (len(taps) - 1) // 2
-    Float = float_type(image.dtype)
-    with kernel_threads():
-        grid = Grid(b * c, h, w, Float)
-        line = _Line(grid, axis)
-        # the taps are data of the kernel, not constants of its code
-        weights, opaque_radius = dr.opaque(Float(taps + [0.0])), runtime(Int32, radius)
-        pixels = flat(image, Float)
-        if adjoint:
-            # at an end of the line, the tap at distance d also takes the gradient of the taps
-            # beyond it that the border replicated: sum_(|j| >= |d|) w_j on the outer side
-            border = dr.opaque(Float([sum(taps[: radius - abs(k - radius) + 1]) for k in range(len(taps))]))
-            out = _correlate_adjoint(pixels, weights, border, opaque_radius, line, Float)
-        else:
-            out = _correlate(pixels, weights, opaque_radius, line, Float)
-        dr.eval(out)
-        return as_tensor(out, (b, c, h, w))
-
-
-class FixedBlurAxis(torch.autograd.Function):
-    """The fused :class:`wise.filters.gaussian._FixedBlurAxis`."""
-
-    @staticmethod
-    def forward(ctx, image: torch.Tensor, kernel: torch.Tensor, axis: int) -> torch.Tensor:  # type: ignore[override]
-        ctx.save_for_backward(kernel)
-        ctx.axis = axis
-        return correlate_axis(image, kernel, axis)
-
-    @staticmethod
-    def backward(ctx, grad: torch.Tensor):  # type: ignore[override]
-        (kernel,) = ctx.saved_tensors
-        return correlate_axis(grad, kernel, ctx.axis, adjoint=True), None, None
 
 
 class _Varying:
