@@ -57,7 +57,8 @@ def main() -> None:
             picture = "×".join(str(n) for n in shape)
             print(
                 f"| {picture} | {sigma} | {kernel.numel()} | {'xy'[3 - axis]} | {conv:.1f} ms | {band:.1f} ms | "
-                f"×{conv / band:.1f} | {conv_adjoint:.1f} ms | {band_adjoint:.1f} ms | ×{conv_adjoint / band_adjoint:.1f} |"
+                f"×{conv / band:.1f} | {conv_adjoint:.1f} ms | {band_adjoint:.1f} ms | "
+                f"×{conv_adjoint / band_adjoint:.1f} |"
             )
 
 

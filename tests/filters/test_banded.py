@@ -5,7 +5,7 @@ import torch
 from torch.autograd import gradcheck, gradgradcheck
 
 from wise.filters import banded
-from wise.filters.gaussian import _correlate_axis, _FixedBlurAxis, _fixed_kernel, gaussian_blur
+from wise.filters.gaussian import _correlate_axis, _fixed_kernel, _FixedBlurAxis, gaussian_blur
 
 SHAPES = [(2, 3, 17, 23), (1, 2, 1, 9), (1, 1, 5, 1), (2, 1, 3, 70), (1, 1, 130, 2), (1, 2, 67, 33)]
 
