@@ -4,7 +4,9 @@ import pytest
 import torch
 import torch.nn.functional as F
 
+from tests.filters.paths import kernels
 from wise.errors import WiseError
+from wise.filters import noise
 from wise.filters.noise import paper_texture, value_noise
 
 FBM = dict(cell_size=6.0, octaves=3)
@@ -21,9 +23,58 @@ def _correlation(a: torch.Tensor, b: torch.Tensor) -> float:
 
 def test_same_seed_and_position_give_identical_values() -> None:
     like = _like(48, 40)
-    assert torch.equal(value_noise(like, seed=7, scale=0.5, **FBM), value_noise(like, seed=7, scale=0.5, **FBM))
-    assert torch.equal(paper_texture(like, seed=7, scale=0.5), paper_texture(like, seed=7, scale=0.5))
-    assert paper_texture(like, seed=7, scale=0.5).shape == (1, 1, 48, 40)
+    made = [value_noise(like, seed=7, scale=0.5, **FBM), paper_texture(like, seed=7, scale=0.5)]
+    noise._remembered.clear()  # made again, not copied
+    assert torch.equal(made[0], value_noise(like, seed=7, scale=0.5, **FBM))
+    assert torch.equal(made[1], paper_texture(like, seed=7, scale=0.5))
+    assert made[1].shape == (1, 1, 48, 40)
+
+
+@pytest.mark.parametrize("path", ["torch", "fused"])
+def test_a_texture_asked_for_again_is_a_copy_of_the_first(path: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    made = []
+    for name in ("_fbm", "_fused_noise"):
+        original = getattr(noise, name)
+        monkeypatch.setattr(noise, name, lambda *a, _original=original, **k: made.append(1) or _original(*a, **k))
+    noise._remembered.clear()
+    like = _like(36, 52, b=2)
+    with kernels(path):
+        first = value_noise(like, seed=3, scale=1.0, **FBM)
+        count = len(made)
+        first_paper = paper_texture(like, seed=3, scale=1.0)
+        count_paper = len(made)
+        first.mul_(0.0)  # a caller's copy: changing it changes no later result
+        again = value_noise(like, seed=3, scale=1.0, **FBM)
+        assert paper_texture(like, seed=3, scale=1.0).equal(first_paper)
+        assert len(made) == count_paper  # nothing made again
+        noise._remembered.clear()
+        assert again.equal(value_noise(like, seed=3, scale=1.0, **FBM)) and again.abs().sum() > 0
+    assert count >= 1
+
+
+def test_textures_of_other_arguments_are_not_confused() -> None:
+    like = _like(40, 40)
+    base = value_noise(like, seed=1, scale=1.0, **FBM)
+    others = [
+        value_noise(like, seed=2, scale=1.0, **FBM),
+        value_noise(like, seed=1, scale=1.5, **FBM),
+        value_noise(like, seed=1, scale=1.0, origin=(8, 0), **FBM),
+        value_noise(like, seed=1, scale=1.0, cell_size=5.0, octaves=3),
+        value_noise(like, seed=1, scale=1.0, cell_size=6.0, octaves=2),
+        paper_texture(like, seed=1, scale=1.0),
+    ]
+    for other in others:
+        assert not torch.equal(other, base)
+    wider = value_noise(_like(40, 48), seed=1, scale=1.0, **FBM)  # the same pattern, more of it
+    assert wider.shape[-1] == 48 and torch.equal(wider[..., :40], base)
+    assert value_noise(_like(40, 40, dtype=torch.float64), seed=1, scale=1.0, **FBM).dtype == torch.float64
+
+
+def test_large_textures_are_made_each_time(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(noise, "REMEMBERED_MAX_PIXELS", 100)
+    noise._remembered.clear()
+    value_noise(_like(12, 12), seed=1, scale=1.0, **FBM)
+    assert not noise._remembered
 
 
 def test_seeds_give_independent_noise() -> None:

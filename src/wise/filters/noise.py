@@ -9,7 +9,9 @@ the seed and on the parameters, so
 * the same call gives the same values on every run (and, up to rounding, on every device),
 * tiles of a large image rendered separately with their ``origin`` (and the large image's
   ``scale``, since the default comes from the tile's own size) join seamlessly,
-* at twice the resolution (``scale`` doubled) the texture is the same pattern, sampled finer.
+* at twice the resolution (``scale`` doubled) the texture is the same pattern, sampled finer,
+* a texture asked for again (the next frame of a video, the next preview in the editor, the
+  next picture of a batch at the same size) is a copy of the one made before.
 
 These textures are inputs to the filters: they are not differentiable with respect to
 their arguments (they carry no gradient).
@@ -18,7 +20,10 @@ their arguments (they carry no gradient).
 from __future__ import annotations
 
 import math
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass
+from typing import Callable
 
 import torch
 
@@ -146,6 +151,34 @@ def _fbm(
     return total.div_(weights)
 
 
+REMEMBERED_TEXTURES = 8
+"""Textures kept for the next call with the same arguments at the same size."""
+REMEMBERED_MAX_PIXELS = 1 << 21
+"""Larger textures are made each time (tiles of a large picture each have their own)."""
+_remembered: OrderedDict[tuple, torch.Tensor] = OrderedDict()
+_remembered_lock = threading.Lock()
+
+
+def _texture(like: torch.Tensor, arguments: tuple, make: Callable[[], torch.Tensor]) -> torch.Tensor:
+    """``make()``'s ``(H, W)`` texture as ``(B, 1, H, W)``, made once per size, device, dtype,
+    path and ``arguments`` among the last :data:`REMEMBERED_TEXTURES`; each caller gets its own copy."""
+    height, width = like.shape[-2:]
+    if height * width > REMEMBERED_MAX_PIXELS:
+        return _as_batch(make(), like)
+    key = (*arguments, height, width, like.dtype, like.device, fused.enabled(like))
+    with _remembered_lock:
+        texture = _remembered.get(key)
+        if texture is not None:
+            _remembered.move_to_end(key)
+    if texture is None:
+        texture = make().view(1, 1, height, width)
+        with _remembered_lock:
+            _remembered[key] = texture
+            while len(_remembered) > REMEMBERED_TEXTURES:
+                _remembered.popitem(last=False)
+    return texture.expand(like.shape[0], 1, -1, -1).clone()
+
+
 def value_noise(
     like: torch.Tensor,
     cell_size: float,
@@ -181,12 +214,16 @@ def value_noise(
     if octaves < 1:
         raise WiseError(f"octaves must be at least 1, got {octaves}")
     key = _layer_key(int(seed), 0)
-    if fused.enabled(like):
-        layer = _fused_layer((cell_size, cell_size), 0.0, key, octaves, persistence)
-        return _as_batch(_fused_noise(like, [layer], origin, scale), like)
-    ys, xs = _reference_positions(like, origin, scale)
-    noise = _fbm(ys, xs, (cell_size, cell_size), 0.0, key, octaves, persistence, like.dtype)
-    return _as_batch(noise, like)
+
+    def make() -> torch.Tensor:
+        if fused.enabled(like):
+            layer = _fused_layer((cell_size, cell_size), 0.0, key, octaves, persistence)
+            return _fused_noise(like, [layer], origin, scale)
+        ys, xs = _reference_positions(like, origin, scale)
+        return _fbm(ys, xs, (cell_size, cell_size), 0.0, key, octaves, persistence, like.dtype)
+
+    arguments = ("value", float(cell_size), key, int(octaves), float(persistence), *_place(like, origin, scale))
+    return _texture(like, arguments, make)
 
 
 @dataclass(frozen=True)
@@ -243,29 +280,32 @@ def paper_texture(
     """
     check_image(like, name="like")
     _check_positive(grain, "grain")
-    if fused.enabled(like):
-        layers = [
-            _fused_layer(
-                (layer.cell_along * grain, layer.cell_across * grain),
-                layer.angle,
-                _layer_key(int(seed), index + 1),
-                layer.octaves,
-                PAPER_PERSISTENCE,
-                layer.weight,
-            )
-            for index, layer in enumerate(_PAPER_LAYERS)
-        ]
-        return _as_batch(_fused_noise(like, layers, origin, scale, contrast=_PAPER_CONTRAST), like)
-    ys, xs = _reference_positions(like, origin, scale)
-    total: torch.Tensor | None = None
-    for index, layer in enumerate(_PAPER_LAYERS):
-        key = _layer_key(int(seed), index + 1)
-        cells = (layer.cell_along * grain, layer.cell_across * grain)
-        noise = _fbm(ys, xs, cells, layer.angle, key, layer.octaves, PAPER_PERSISTENCE, like.dtype)
-        total = noise * layer.weight if total is None else total.add_(noise, alpha=layer.weight)
-    assert total is not None
-    height = ((total - 0.5) * _PAPER_CONTRAST + 0.5).clamp_(0.0, 1.0)
-    return _as_batch(height, like)
+
+    def make() -> torch.Tensor:
+        if fused.enabled(like):
+            layers = [
+                _fused_layer(
+                    (layer.cell_along * grain, layer.cell_across * grain),
+                    layer.angle,
+                    _layer_key(int(seed), index + 1),
+                    layer.octaves,
+                    PAPER_PERSISTENCE,
+                    layer.weight,
+                )
+                for index, layer in enumerate(_PAPER_LAYERS)
+            ]
+            return _fused_noise(like, layers, origin, scale, contrast=_PAPER_CONTRAST)
+        ys, xs = _reference_positions(like, origin, scale)
+        total: torch.Tensor | None = None
+        for index, layer in enumerate(_PAPER_LAYERS):
+            key = _layer_key(int(seed), index + 1)
+            cells = (layer.cell_along * grain, layer.cell_across * grain)
+            noise = _fbm(ys, xs, cells, layer.angle, key, layer.octaves, PAPER_PERSISTENCE, like.dtype)
+            total = noise * layer.weight if total is None else total.add_(noise, alpha=layer.weight)
+        assert total is not None
+        return ((total - 0.5) * _PAPER_CONTRAST + 0.5).clamp_(0.0, 1.0)
+
+    return _texture(like, ("paper", int(seed), float(grain), *_place(like, origin, scale)), make)
 
 
 def _fused_layer(cells: tuple[float, float], angle: float, key: int, octaves: int, persistence: float, weight=1.0):
@@ -285,6 +325,11 @@ def _fused_noise(like: torch.Tensor, layers: list, origin: tuple[int, int], scal
     constants = Hash(_MIX_A, _MIX_B, _VALUE_BITS, LACUNARITY, OCTAVE_TURN)
     origin = (int(origin[0]), int(origin[1]))
     return mixed_noise(like.shape[-2], like.shape[-1], like.dtype, layers, constants, origin, s, contrast)
+
+
+def _place(like: torch.Tensor, origin: tuple[int, int], scale: float | None) -> tuple[int, int, float]:
+    """Where the texture lies in the picture: its origin and its resolved scale."""
+    return int(origin[0]), int(origin[1]), resolution_scale(like) if scale is None else float(scale)
 
 
 def _as_batch(texture: torch.Tensor, like: torch.Tensor) -> torch.Tensor:
