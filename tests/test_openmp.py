@@ -1,0 +1,35 @@
+"""OpenMP's threads wait passively when wise is imported before torch, unless the user chose."""
+
+import os
+import subprocess
+import sys
+
+import pytest
+
+PROGRAM = "import os, sys\n{imports}\nprint(os.environ.get('OMP_WAIT_POLICY'))"
+
+
+def _policy(imports: str, **env: str) -> str:
+    environment = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"} | env
+    done = subprocess.run(
+        [sys.executable, "-c", PROGRAM.format(imports=imports)],
+        env=environment,
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    return done.stdout.strip()
+
+
+@pytest.mark.parametrize("imports", ["import wise", "from wise.filters import gaussian_blur", "import wise.cli"])
+def test_importing_wise_first_makes_the_waiting_passive(imports: str) -> None:
+    assert _policy(imports + "\nimport torch") == "PASSIVE"
+
+
+def test_a_policy_the_user_chose_is_kept() -> None:
+    assert _policy("import wise", OMP_WAIT_POLICY="ACTIVE") == "ACTIVE"
+
+
+def test_after_torch_it_is_left_alone() -> None:
+    # OpenMP has read its policy already: setting one now would only mislead
+    assert _policy("import torch\nimport wise") == "None"
