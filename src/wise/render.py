@@ -24,6 +24,7 @@ import torch.nn.functional as F
 from wise.effects.base import Effect
 from wise.filters import gaussian_blur
 from wise.filters._checks import REFERENCE_SHORT_SIDE
+from wise.filters.resize import bilinear_resize
 from wise.params import check_params
 
 MAX_SPLITS = 64
@@ -170,7 +171,7 @@ def _guide(
         factor = scale / GUIDE_MAX_SCALE
         size = (max(1, round(height / factor)), max(1, round(width / factor)))
         small = _guide(effect, reduced(image, size), params, min(size) / REFERENCE_SHORT_SIDE, device)
-        return F.interpolate(small, size=(height, width), mode="bilinear", align_corners=False)
+        return bilinear_resize(small, (height, width))
     halo = _align(effect.guide_halo(scale))
     guide = image.new_empty((batch, effect.guide_channels, height, width))
     for t, crop, crop_params in _tile_inputs(

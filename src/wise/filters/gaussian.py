@@ -10,6 +10,7 @@ import torch.nn.functional as F
 from wise.filters import fused
 from wise.filters._checks import ParamLike, as_map, check_image, max_value, resolution_scale
 from wise.filters.banded import correlate_axis, correlate_axis_adjoint
+from wise.filters.resize import bilinear_resize
 from wise.filters.sampling import tap_sum
 
 MIN_SIGMA = 1e-3
@@ -107,7 +108,8 @@ def _blur_by_pyramid(image: torch.Tensor, pixels: float) -> torch.Tensor:
     height, width = image.shape[-2:]
     reduced = F.avg_pool2d(image, factor, ceil_mode=True)
     blurred = _blur_axis_fixed(_blur_axis_fixed(reduced, pixels / factor, 3), pixels / factor, 2)
-    return F.interpolate(blurred, scale_factor=factor, mode="bilinear", align_corners=False)[..., :height, :width]
+    enlarged = bilinear_resize(blurred, (blurred.shape[-2] * factor, blurred.shape[-1] * factor))
+    return enlarged[..., :height, :width]
 
 
 def _blur_axis_varying(image: torch.Tensor, sigma: torch.Tensor, axis: int) -> torch.Tensor:

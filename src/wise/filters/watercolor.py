@@ -19,6 +19,7 @@ from wise.filters._checks import ParamLike, as_map, check_image, resolution_scal
 from wise.filters.flow import check_direction
 from wise.filters.gaussian import SUPPORT, gaussian_blur
 from wise.filters.quantize import quantize
+from wise.filters.resize import bilinear_resize
 from wise.filters.sampling import sample, tap_sum
 from wise.filters.upsample import downsample
 
@@ -349,7 +350,7 @@ def flat_washes(
     softness = SOFTEST_WASH + (SHARPEST_WASH - SOFTEST_WASH) * low_f
     steps = quantize(smooth, levels, softness) - smooth
     if reduction > 1:
-        steps = F.interpolate(steps, size=image.shape[-2:], mode="bilinear", align_corners=False)
+        steps = bilinear_resize(steps, image.shape[-2:])
     return (image + f * steps).clamp(0.0, 1.0)
 
 
@@ -412,7 +413,7 @@ def feature_accents(
     lights = torch.cat((photo_light.expand_as(wash_light), wash_light), dim=1)
     # the surroundings are smooth: blurred at half resolution (an eighth of the cost), then enlarged
     low = gaussian_blur(downsample(lights, ACCENT_REDUCTION), sigma, scale=s / ACCENT_REDUCTION)
-    surroundings = F.interpolate(low, size=lights.shape[-2:], mode="bilinear", align_corners=False)
+    surroundings = bilinear_resize(low, lights.shape[-2:])
     target = surroundings[:, 1:2] * photo_light / surroundings[:, 0:1]
     ramp = ((wash_light - target - threshold) / knee).clamp(0.0, 1.0)
     weight = ramp * ramp * (3.0 - 2.0 * ramp)  # smoothstep
