@@ -9,6 +9,10 @@ checkout first on ``PYTHONPATH``:
     PYTHONPATH=OLD/src python benchmarks/bench_examples.py --images photos/train --effects xdog
     python benchmarks/bench_examples.py --images photos/train --effects xdog
 
+This script imports torch before wise, so OpenMP's waiting policy is what the environment says:
+``wise train`` (which imports wise first) runs with ``OMP_WAIT_POLICY=PASSIVE``; set it for a
+run to measure what the command does.
+
 Dead-leaves pictures (where the version has them) are all made before the timing starts: a
 run makes them once, in its first minutes.
 """
