@@ -61,18 +61,18 @@ def _correlate(image: torch.Tensor, kernel: torch.Tensor, axis: int, replicate: 
     kernel = kernel.to(image.dtype)
     if axis == 3:
         lines = image.reshape(b * c * h, w)  # rows: out[:, j] = in[:, j - r : j + r + 1] @ T[:, j]
-        size, along = w, 1
+        size = w
         band = _toeplitz(kernel, min(block, w))
     else:
         lines = image.reshape(b * c, h, w)  # columns: out[:, i] = T[:, i]^T @ in[:, i - r : i + r + 1]
-        size, along = h, 1
+        size = h
         band = _toeplitz(kernel, min(block, h)).t().contiguous()
     lines = lines.contiguous()
     out = torch.empty_like(lines)
     for start in range(0, size, block):
         stop = min(size, start + block)
         count = stop - start
-        read = _window(lines, along, start - radius, stop + radius, replicate)
+        read = _window(lines, 1, start - radius, stop + radius, replicate)
         if axis == 3:
             torch.mm(read, band[: count + 2 * radius, :count], out=out[:, start:stop])
         else:
@@ -98,7 +98,7 @@ def correlate_axis_adjoint(grad: torch.Tensor, kernel: torch.Tensor, axis: int) 
     inner = _correlate(grad, kernel, axis, replicate=False)
     reach = min(radius, size - 1) + 1
     # c_n for n = 0 .. reach - 1: the taps at or beyond -n
-    border = torch.stack([kernel[: radius - n + 1].sum() for n in range(reach)])
+    border = kernel.cumsum(0)[radius - torch.arange(reach, device=kernel.device)]
     shape = [1, 1, 1, 1]
     shape[axis] = reach
     border = border.view(shape)
