@@ -68,6 +68,7 @@ def test_the_engine_check_reports_the_library() -> None:
     )
     assert done.returncode == 0
     assert "(works)" in done.stdout
+    assert "compiled for: " in done.stdout and "lanes, gathers as " in done.stdout
 
 
 @pytest.mark.skipif(not llvm_backend(), reason="Dr.Jit's CPU backend does not start here")
@@ -115,3 +116,52 @@ def test_a_library_named_older_than_15_is_not_loaded() -> None:
     assert _too_old("/usr/lib/x86_64-linux-gnu/libLLVM-14.so.1") and _too_old("/usr/lib/libLLVM.so.13.0")
     assert not _too_old("/usr/lib/x86_64-linux-gnu/libLLVM-15.so") and not _too_old("/usr/lib/libLLVM.so.19.1")
     assert not _too_old("/opt/llvm/lib/libLLVM.dylib")  # no version in the name: Dr.Jit is asked
+
+
+def test_hardware_gathers_are_chosen_for_measured_cpus_with_avx2_only() -> None:
+    from wise.filters.fused._target import Target, wants_hardware_gathers
+
+    assert wants_hardware_gathers(Target("znver3", "+avx,+avx2,+fma", 8))
+    assert not wants_hardware_gathers(Target("znver3", "+avx,-avx2", 8))
+    assert not wants_hardware_gathers(Target("znver3", "+avx2,+fast-gather", 8))  # already
+    assert not wants_hardware_gathers(Target("znver4", "+avx2,+avx512f", 16))  # LLVM's own choice
+    assert not wants_hardware_gathers(Target("znver2", "+avx2", 8))  # not measured
+    assert Target("skylake-avx512", "+avx2,+avx512f", 16).hardware_gathers
+    assert not Target("znver3", "+avx2,-fast-gather", 8).hardware_gathers
+
+
+@pytest.mark.skipif(not llvm_backend(), reason="Dr.Jit's CPU backend does not start here")
+def test_hardware_gathers_give_the_same_bits_as_scalar_loads() -> None:
+    import torch
+
+    from wise.filters.bilateral import bilateral_pass
+    from wise.filters.fused._target import current, set_hardware_gathers
+    from wise.filters.kuwahara import anisotropic_kuwahara
+    from wise.filters.structure import structure_tensor
+
+    generator = torch.Generator().manual_seed(3)
+    image = torch.rand(1, 3, 40, 52, generator=generator, requires_grad=True)
+    angle = torch.rand(1, 1, 40, 52, generator=generator) * 6.3
+    direction = torch.cat((angle.cos(), angle.sin()), dim=1)
+
+    def outputs() -> list[torch.Tensor]:
+        smoothed = bilateral_pass(image, direction, 3.0, 0.2, scale=1.0)
+        washed = anisotropic_kuwahara(image, structure_tensor(image.detach()), 3.0, scale=1.0)
+        (gradient,) = torch.autograd.grad((smoothed.sum() + washed.square().sum()), image)
+        return [smoothed.detach(), washed.detach(), gradient]
+
+    chosen = current().hardware_gathers
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # scattered gradients are summed in the threads' order
+    try:
+        set_hardware_gathers(True)
+        assert current().hardware_gathers
+        hardware = outputs()
+        set_hardware_gathers(False)
+        assert not current().hardware_gathers or "+avx512f" in current().features
+        scalar = outputs()
+    finally:
+        set_hardware_gathers(chosen)
+        torch.set_num_threads(threads)
+    for a, b in zip(hardware, scalar):
+        assert torch.equal(a, b)

@@ -104,6 +104,10 @@ def _start_llvm() -> bool:
         import drjit
 
         working = bool(drjit.has_backend(drjit.JitBackend.LLVM))
+    if working:
+        from wise.filters.fused._target import choose_gathers
+
+        choose_gathers()
     if not working:
         too_old = any("too old" in line for line in messages)
         print(f"wise: {MISSING_LLVM_NOTICE}{_TOO_OLD if too_old else ''}", file=sys.stderr, flush=True)
