@@ -18,17 +18,19 @@ import os
 import stat
 from dataclasses import dataclass
 from pathlib import Path
-from typing import BinaryIO, Collection
-
-import torch
-from safetensors.torch import load as _st_load
+from typing import TYPE_CHECKING, BinaryIO, Collection
 
 from wise.errors import WiseError
+
+if TYPE_CHECKING:
+    import torch
 
 PathLike = str | os.PathLike[str]
 
 MAX_PARAMS_BYTES = 256 * 1000**2
 """Largest parameter file: a local mask of 16 parameters at 2000x2000 is 256 MB."""
+PARAMS_WHAT = "parameter file"
+"""How messages name a parameter file."""
 MAX_MODEL_BYTES = 2 * 1000**3
 """Largest model file (torchvision's VGG-19 is about 550 MB)."""
 MAX_HEADER_BYTES = 1000**2
@@ -288,6 +290,12 @@ def _subset(f: BinaryIO, path: Path, start: int, entries: dict[str, TensorEntry]
     text = json.dumps(header, separators=(",", ":")).encode()
     text += b" " * (-len(text) % HEADER_LENGTH_BYTES)
     return len(text).to_bytes(HEADER_LENGTH_BYTES, "little") + text + b"".join(chunks)
+
+
+def _st_load(data: bytes) -> dict[str, torch.Tensor]:
+    from safetensors.torch import load  # with PyTorch: loaded when a file's tensors are read
+
+    return load(data)
 
 
 def read_safetensors(

@@ -37,14 +37,14 @@ from safetensors.torch import save as _st_save
 from wise import params as P
 from wise.effects.base import Effect
 from wise.errors import WiseError, WiseWarning
-from wise.files import MAX_PARAMS_BYTES, read_safetensors, read_safetensors_header
+from wise.files import MAX_PARAMS_BYTES, PARAMS_WHAT, read_safetensors, read_safetensors_header
 from wise.io import PathLike, atomic_path
 
 FORMAT = "wise-params"
 VERSION = "1"
 SPACES = ("normalized", "real")
 TENSOR_KEY = "params"
-WHAT = "parameter file"
+WHAT = PARAMS_WHAT
 RANGE_TOLERANCE = 1e-4
 """Normalized distance outside [-0.5, 0.5] clamped without a warning (float rounding of real-space files)."""
 MAKE_ONE = "make one with wise optimize, the editor's Save params or wise.paramfile.save_params"

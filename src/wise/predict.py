@@ -19,9 +19,10 @@ import torch
 from wise import effects, metrics
 from wise.effects.base import Effect
 from wise.io import atomic_path, read_image, write_image
-from wise.optimize.refine import DEFAULT_BUDGET, answers, refine
+from wise.optimize.refine import answers, refine
 from wise.optimize.report import mask_sheet
 from wise.optimize.run import match_target
+from wise.optimize.settings import DEFAULT_BUDGET
 from wise.paramfile import save_params
 from wise.ppn.predictor import LocalPredictor, Predictor
 from wise.render import render

@@ -19,7 +19,7 @@ from skimage import data
 import wise
 from wise.interrupt import ctrl_c
 from wise.io import read_image
-from wise.optimize.run import RESULT_FILES
+from wise.optimize.settings import RESULT_FILES
 from wise.paramfile import load_params
 
 SRC = Path(wise.__file__).resolve().parent.parent

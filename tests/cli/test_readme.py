@@ -9,6 +9,7 @@ import pytest
 import wise
 from wise.cli import main
 from wise.cli.effects import markdown_table
+from wise.effects.catalogue import entry
 
 README = Path(__file__).resolve().parents[2] / "README.md"
 
@@ -18,7 +19,7 @@ README = Path(__file__).resolve().parents[2] / "README.md"
 def test_readme_table_matches_the_effect(name: str) -> None:
     text = README.read_text(encoding="utf-8")
     section = text.split(f"### `{name}`", 1)[1].split("\n### ", 1)[0]
-    table = markdown_table(wise.effects.create(name))
+    table = markdown_table(entry(name))
     assert table in section, f"regenerate the README table of {name} with: wise effects {name} --markdown"
 
 

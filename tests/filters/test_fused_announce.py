@@ -13,9 +13,9 @@ pytestmark = needs_kernels
 
 PROGRAM = """
 import torch
-from wise.filters import fused
+from wise import notices
 from wise.filters.gaussian import gaussian_blur
-fused.announce_compilation(lambda line: print("NOTICE", line))
+notices.announce_compilation(lambda line: print("NOTICE", line))
 for size in (9, 12):
     gaussian_blur(torch.rand(1, 1, size, size), torch.full((1, 1, size, size), 1.0), scale=1.0)
 print("done")
@@ -44,8 +44,9 @@ def test_kernels_compiled_ahead_are_not_announced(tmp_path, monkeypatch) -> None
 
 
 def test_the_command_line_installs_the_announcement(monkeypatch) -> None:
+    from wise import notices
     from wise.cli import main
 
-    monkeypatch.setattr(fused, "_announce", None)
+    monkeypatch.setattr(notices, "_compilation", None)
     assert main(["effects"]) == 0
-    assert fused._announce is not None
+    assert notices._compilation is not None

@@ -12,6 +12,7 @@ from wise.filters.smoothing import step_temperature
 from wise.optimize import Settings, optimize
 from wise.optimize.adam import Adam
 from wise.optimize.parametric import PYRAMIDS, optimize_coarse_to_fine, optimize_on_crops, pyramid
+from wise.optimize.settings import MASK_SOFT_GRADIENTS
 from wise.params import mask_bounds
 
 
@@ -314,7 +315,7 @@ def test_masks_take_away_ink_the_target_lacks_through_soft_gradients() -> None:
 
 
 def test_soft_gradients_default_to_per_pixel_descent() -> None:
-    assert Settings(mode="local").soft_gradients == parametric.MASK_SOFT_GRADIENTS > 0.0
+    assert Settings(mode="local").soft_gradients == MASK_SOFT_GRADIENTS > 0.0
     assert Settings(mode="global").soft_gradients == 0.0
     with pytest.raises(WiseError, match="gradient softness"):
         Settings(soft_gradients=1.5)

@@ -161,4 +161,4 @@ def test_the_parameter_weight_adds_the_parameter_error_to_the_image_loss() -> No
     batch = {"photo": photo, "example": target, "target": target, "params": truth}
     (image_loss, param_l1), (total, same_l1) = plain._losses(batch), weighted._losses(batch)
     assert float(param_l1) > 0.05 and same_l1 == param_l1
-    assert float(total) == pytest.approx(float(image_loss) + 0.5 * float(param_l1), rel=1e-5)
+    assert float(total.detach()) == pytest.approx(float(image_loss.detach()) + 0.5 * float(param_l1), rel=1e-5)

@@ -17,9 +17,34 @@ Example::
 
 from __future__ import annotations
 
-from wise.batch.api import stylize
-from wise.batch.inputs import Job, plan
-from wise.batch.look import Look, LookSpec, Rendered
-from wise.batch.run import Outcome, Summary
+import importlib
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from wise.batch.api import stylize
+    from wise.batch.inputs import Job, plan
+    from wise.batch.look import Look, Rendered
+    from wise.batch.run import Outcome, Summary
+    from wise.batch.spec import LookSpec
+
+_LAZY = {
+    "stylize": "api",
+    "Job": "inputs",
+    "plan": "inputs",
+    "Look": "look",
+    "Rendered": "look",
+    "LookSpec": "spec",
+    "Outcome": "run",
+    "Summary": "run",
+}
+
+
+def __getattr__(name: str) -> object:
+    """The package's classes and functions, each module loaded on first use (the command line
+    checks its arguments before PyTorch loads)."""
+    if name in _LAZY:
+        return getattr(importlib.import_module(f"wise.batch.{_LAZY[name]}"), name)
+    raise AttributeError(f"module 'wise.batch' has no attribute {name!r}")
+
 
 __all__ = ["Job", "Look", "LookSpec", "Outcome", "Rendered", "Summary", "plan", "stylize"]

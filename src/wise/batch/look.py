@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 import torch
 
 from wise import effects
+from wise.batch.spec import LookSpec, Settings
 from wise.effects.base import Effect
 from wise.errors import WiseError
 from wise.paramfile import load_params
@@ -33,25 +34,6 @@ from wise.ppn.modelfile import model_info, model_path
 from wise.ppn.predictor import LocalPredictor
 from wise.ppn.translation import NO_EFFECT
 from wise.render import render
-
-Settings = tuple[tuple[str, float], ...]
-
-
-@dataclass(frozen=True)
-class LookSpec:
-    """What to render: an effect name and where its parameters come from (see the module)."""
-
-    effect: str
-    preset: str | None = None
-    params: str | None = None
-    settings: Settings = ()
-    model: str | None = None
-    kernel_size: int | None = None
-    device: str = "cpu"
-
-    def __post_init__(self) -> None:
-        if self.params and self.preset:
-            raise WiseError("--params and --preset cannot be combined; edit the file's values with --set instead")
 
 
 @dataclass

@@ -10,33 +10,50 @@ warnings of the libraries underneath are not shown.
 from __future__ import annotations
 
 import argparse
+import importlib
 import os
 import sys
 import warnings
 from typing import Sequence, TextIO
 
-import torch
-
 from wise import __version__
-from wise.cli import apply, bench, data, edit, effects, optimize, predict, train
-from wise.cli.parser import EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_USAGE, PROG, Parser, apply_pixel_limit, one_line
+from wise.cli.parser import (
+    COMMANDS,
+    EXIT_FAILURE,
+    EXIT_INTERRUPTED,
+    EXIT_USAGE,
+    PROG,
+    Parser,
+    apply_pixel_limit,
+    one_line,
+)
 from wise.errors import WiseError, WiseWarning
-from wise.filters.fused import announce_compilation
 from wise.io import MAX_PIXELS_ENV
+from wise.notices import announce_compilation
 
-COMMAND_GROUPS = (effects, apply, optimize, predict, train, data, edit, bench)
 
-
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of the ``wise`` command."""
+def build_parser(chosen: str | None = None) -> argparse.ArgumentParser:
+    """The argument parser of the ``wise`` command. Only the module of the ``chosen`` command is
+    imported, and only its commands get their arguments; the others are listed with their help
+    (see :data:`~wise.cli.parser.COMMANDS`)."""
     parser = Parser(
         prog=PROG, description="Whitebox image stylization: differentiable effects with editable parameters."
     )
     parser.add_argument("--version", action="version", version=f"{PROG} {__version__}")
     commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for group in COMMAND_GROUPS:
-        group.register(commands)
+    wanted = COMMANDS[chosen][0] if chosen in COMMANDS else None
+    for name, (module, help, _) in COMMANDS.items():
+        if module != wanted:
+            commands.add_parser(name, help=help, add_help=False)
+        elif name not in commands.choices:
+            importlib.import_module(f"wise.cli.{module}").register(commands)
     return parser
+
+
+def chosen_command(argv: Sequence[str]) -> str | None:
+    """The command named in ``argv``: its first word that is not an option (the ``wise`` command's
+    own options take no values)."""
+    return next((word for word in argv if not word.startswith("-")), None)
 
 
 def _error(message: str, err: TextIO) -> None:
@@ -50,6 +67,14 @@ def _show_warning(err: TextIO):
     return show
 
 
+OUT_OF_MEMORY = "out of memory; try --device cpu, a smaller image or a smaller --size"
+
+
+def _out_of_device_memory(error: RuntimeError) -> bool:
+    torch = sys.modules.get("torch")  # loaded by any command that can run out of GPU memory
+    return torch is not None and isinstance(error, torch.cuda.OutOfMemoryError)
+
+
 def _run(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     try:
         code = int(args.func(args, out))
@@ -61,8 +86,13 @@ def _run(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
     except OSError as e:
         where = f"{e.filename}: " if e.filename else ""
         _error(f"{where}{e.strerror or e}", err)
-    except (torch.cuda.OutOfMemoryError, MemoryError):
-        _error("out of memory; try --device cpu, a smaller image or a smaller --size", err)
+    except MemoryError:
+        _error(OUT_OF_MEMORY, err)
+        return EXIT_FAILURE
+    except RuntimeError as e:
+        if not _out_of_device_memory(e):
+            raise
+        _error(OUT_OF_MEMORY, err)
         return EXIT_FAILURE
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted", file=err, flush=True)
@@ -72,7 +102,8 @@ def _run(args: argparse.Namespace, out: TextIO, err: TextIO) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``wise`` command with ``argv`` (default: ``sys.argv[1:]``); return the exit code."""
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(chosen_command(argv))
     try:
         args = parser.parse_args(argv)
     except SystemExit as e:

@@ -3,18 +3,15 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import sys
 import time
 from pathlib import Path
 from typing import TextIO
 
-import numpy as np
-
-from wise import effects
 from wise.batch.inputs import PARAMS_SUFFIX, Job, is_batch, is_video, plan
-from wise.batch.look import Look, LookSpec
-from wise.batch.run import JsonLog, run_jobs, write
+from wise.batch.spec import LookSpec
 from wise.cli import args as types
 from wise.cli.effects import fmt
 from wise.cli.outputs import OutputFolder, output_file
@@ -25,17 +22,16 @@ from wise.cli.parser import (
     add_device,
     add_pixel_limit,
     add_size,
-    command,
     device,
+    top_command,
 )
-from wise.effects.base import Effect
+from wise.effects.catalogue import NAMES, NO_EFFECT, Entry, check_name, entry
 from wise.errors import WiseError, size_text
-from wise.gallery import make_sheet
-from wise.io import WRITE_FORMATS, image_to_tensor, read_image, write_image
-from wise.ppn.translation import NO_EFFECT
+from wise.files import MAX_PARAMS_BYTES, PARAMS_WHAT, regular_file
+from wise.io import WRITE_FORMATS, check_image_file
 
 
-def parse_set(item: str, effect: Effect | None) -> tuple[str, float]:
+def parse_set(item: str, effect: Entry | None) -> tuple[str, float]:
     """``NAME=VALUE`` in real units, checked against ``effect``: (name, value)."""
     name, sep, text = item.partition("=")
     name, text = name.strip(), text.strip()
@@ -56,15 +52,25 @@ def parse_set(item: str, effect: Effect | None) -> tuple[str, float]:
 
 
 def _look(args: argparse.Namespace) -> LookSpec:
-    """The look of the command line, its names and numbers checked (files are read by :class:`Look`)."""
+    """The look of the command line, its names and numbers checked and its parameter file found
+    (files are read by :class:`~wise.batch.look.Look`)."""
     if args.params and args.preset:
         raise WiseError("--params and --preset cannot be combined; edit the file's values with --set instead")
-    effect = None if args.effect == NO_EFFECT else effects.create(args.effect)
+    effect = None if args.effect == NO_EFFECT else entry(args.effect)
+    if effect is not None and args.preset is not None:
+        effect.check_preset(args.preset)
     settings = tuple(parse_set(item, effect) for item in args.set)
+    if args.params:
+        regular_file(args.params, PARAMS_WHAT, MAX_PARAMS_BYTES)
     return LookSpec(
         args.effect, preset=args.preset, params=args.params, settings=settings, model=args.model,
-        kernel_size=args.kernel_size, device=_device_name(args),
+        kernel_size=args.kernel_size,
     )  # fmt: skip
+
+
+def _on_device(spec: LookSpec, args: argparse.Namespace) -> LookSpec:
+    """``spec`` on the device of ``--device`` (which loads PyTorch: once the inputs are checked)."""
+    return dataclasses.replace(spec, device=_device_name(args))
 
 
 def _device_name(args: argparse.Namespace) -> str:
@@ -102,7 +108,12 @@ def _apply_one(args: argparse.Namespace, spec: LookSpec, out: TextIO) -> int:
     params_file = output.with_suffix(PARAMS_SUFFIX) if args.save_params else None
     if params_file is not None:
         output_file(params_file, inputs, (PARAMS_SUFFIX,))
-    look = Look(spec)
+    check_image_file(args.inputs[0])
+    from wise.batch.look import Look
+    from wise.batch.run import write
+    from wise.io import read_image
+
+    look = Look(_on_device(spec, args))
     rendered = look.render(read_image(args.inputs[0]))
     write(Job(Path(args.inputs[0]), output, params_file), rendered, look, args.quality)
     if not args.quiet:
@@ -125,6 +136,9 @@ def _apply_batch(args: argparse.Namespace, spec: LookSpec, out: TextIO) -> int:
         output_file(args.log, {"--log": None})
         if str(Path(args.log).resolve()) in sources:
             raise WiseError(f"{args.log}: is one of the input images; write the log to another file")
+    from wise.batch.look import Look
+    from wise.batch.run import JsonLog, run_jobs
+
     journal = JsonLog(args.log)
     try:
         if args.ray:
@@ -132,15 +146,16 @@ def _apply_batch(args: argparse.Namespace, spec: LookSpec, out: TextIO) -> int:
 
             require_ray()
             summary = run_on_ray(
-                spec, jobs, address=args.ray_address, gpus_per_worker=args.ray_gpus_per_worker,
+                _on_device(spec, args), jobs, address=args.ray_address, gpus_per_worker=args.ray_gpus_per_worker,
                 quality=args.quality, overwrite=args.overwrite, log=journal, progress=_progress_shown(),
             )  # fmt: skip
             for failure in summary.failed:
                 print(f"{PROG}: failed: {failure.error}", file=sys.stderr)
         else:
             summary = run_jobs(
-                Look(spec), jobs, workers=args.workers, quality=args.quality, overwrite=args.overwrite, log=journal,
-                progress=_progress_shown(), report=lambda o: print(f"{PROG}: failed: {o.error}", file=sys.stderr),
+                Look(_on_device(spec, args)), jobs, workers=args.workers, quality=args.quality,
+                overwrite=args.overwrite, log=journal, progress=_progress_shown(),
+                report=lambda o: print(f"{PROG}: failed: {o.error}", file=sys.stderr),
             )  # fmt: skip
     finally:
         journal.close()
@@ -157,11 +172,13 @@ def _apply_video(args: argparse.Namespace, spec: LookSpec, out: TextIO) -> int:
     for option, given in (("--ray", args.ray), ("--save-params", args.save_params), ("--format", args.format)):
         if given:
             raise WiseError(f"{option} is for images; a video is stylized frame by frame into one video file")
+    from wise.batch.look import Look
+
     check_video_output(args.output, args.codec, crf=args.crf)
     output = output_file(args.output, {"video": args.inputs[0], "--params": args.params, "--model": args.model},
                          VIDEO_OUTPUT_SUFFIXES)  # fmt: skip
     info = probe(args.inputs[0])
-    look = Look(spec)
+    look = Look(_on_device(spec, args))
     result = stylize_video(
         look, Path(args.inputs[0]), output, crf=args.crf, codec=args.codec,
         temporal_smoothing=args.temporal_smoothing, progress=_progress_shown(),
@@ -179,10 +196,16 @@ def _progress_shown() -> bool:
 
 
 def run_gallery(args: argparse.Namespace, out: TextIO) -> int:
-    names = args.effects or effects.available()
+    names = args.effects or sorted(NAMES)
     for name in names:
-        effects.create(name)  # unknown names fail before any work
+        check_name(name)  # unknown names fail before any work
     output = output_file(args.output, {"image": args.input}, WRITE_FORMATS)
+    check_image_file(args.input)
+    import numpy as np
+
+    from wise.gallery import make_sheet
+    from wise.io import image_to_tensor, read_image, write_image
+
     target_device = device(args.device)
     image = read_image(args.input)
 
@@ -196,7 +219,7 @@ def run_gallery(args: argparse.Namespace, out: TextIO) -> int:
 
 
 def register(commands: argparse._SubParsersAction) -> None:
-    apply = command(commands, "apply", "stylize images, folders of images or a video with an effect")
+    apply = top_command(commands, "apply")
     apply.add_argument("effect", metavar="EFFECT", help="effect name (see 'wise effects'); none for a CNN-only model")
     apply.add_argument(
         "inputs",
@@ -269,7 +292,7 @@ def register(commands: argparse._SubParsersAction) -> None:
     )  # fmt: skip
     apply.set_defaults(func=run_apply)
 
-    gallery = command(commands, "gallery", "every effect and preset on one labelled contact sheet")
+    gallery = top_command(commands, "gallery")
     gallery.add_argument("input", metavar="INPUT", help="input image (PNG, JPEG, WebP or TIFF)")
     gallery.add_argument("-o", "--output", required=True, metavar="SHEET", help="output sheet (.png or .jpg)")
     add_size(gallery, types.cell_size, "each cell")

@@ -9,11 +9,11 @@ from typing import TextIO
 from wise import effects
 from wise.cli import args as types
 from wise.cli.outputs import output_file
-from wise.cli.parser import add_device, add_pixel_limit, add_size, command, device, exit_code
+from wise.cli.parser import add_device, add_pixel_limit, add_size, command, device, exit_code, top_command
 from wise.errors import WiseError
 from wise.fidelity import load_inception, load_lpips
 from wise.optimize.benchmark import INIT_PPN, ITERATIONS, parse_init, recover
-from wise.optimize.refine import DEFAULT_BUDGET
+from wise.optimize.settings import DEFAULT_BUDGET
 from wise.optimize.trials import photos_in
 from wise.ppn.modelfile import model_info, resolve_model
 from wise.ppn.translation import NO_EFFECT
@@ -108,7 +108,7 @@ def run_pairs(args: argparse.Namespace, out: TextIO) -> int:
 
 
 def register(commands: argparse._SubParsersAction) -> None:
-    bench = command(commands, "bench", "benchmarks", writes=False)
+    bench = top_command(commands, "bench")
     benches = bench.add_subparsers(dest="bench", metavar="BENCHMARK", required=True, parser_class=type(bench))
     recover_parser = command(benches, "recover", "recover random global parameters by optimization")
     recover_parser.add_argument("effect", metavar="EFFECT", help="effect name (see 'wise effects')")

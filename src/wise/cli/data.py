@@ -12,7 +12,7 @@ from typing import TextIO
 
 from wise.cli import args as types
 from wise.cli.outputs import OutputFolder
-from wise.cli.parser import add_pixel_limit, add_size, command, exit_code
+from wise.cli.parser import add_pixel_limit, add_size, command, exit_code, top_command
 from wise.errors import WiseError, WiseWarning
 from wise.train.adaptive import MIN_CHANGE, SPLITS, TASKS, AdaptiveSettings, load_photos, write_pairs
 from wise.train.drawing_pairs import DESCRIPTION_FILE, DrawingSettings, write_drawing_pairs
@@ -81,7 +81,7 @@ def _prepare(args: argparse.Namespace, description: str, size: int) -> tuple[Out
 
 
 def register(commands: argparse._SubParsersAction) -> None:
-    data = command(commands, "data", "make data sets", writes=False)
+    data = top_command(commands, "data")
     kinds = data.add_subparsers(dest="kind", metavar="KIND", required=True, parser_class=type(data))
     parser = command(
         kinds,

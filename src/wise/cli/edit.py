@@ -6,18 +6,22 @@ import argparse
 from typing import TextIO
 
 from wise.cli import args as types
-from wise.cli.parser import add_pixel_limit, command
-from wise.editor.server import LOOPBACK, initial_session, serve
+from wise.cli.parser import add_pixel_limit, top_command
+from wise.editor.addresses import LOOPBACK
+from wise.editor.start import check_start
 
 
 def run(args: argparse.Namespace, out: TextIO) -> int:
+    check_start(args.image, args.params, args.effect, args.preset, args.model)
+    from wise.editor.server import initial_session, serve
+
     session = initial_session(args.image, args.params, args.effect, args.preset, args.model)
     serve(session, args.host, args.port, out)
     return 0
 
 
 def register(commands: argparse._SubParsersAction) -> None:
-    edit = command(commands, "edit", "the web editor: paint parameter masks and see the result", writes=False)
+    edit = top_command(commands, "edit")
     edit.add_argument("image", nargs="?", metavar="IMAGE", help="content image to open")
     start = edit.add_mutually_exclusive_group()
     start.add_argument("--params", metavar="FILE", help="parameter file to edit (from wise optimize or the editor)")

@@ -3,12 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import inspect
 from typing import TextIO
 
-from wise import effects
-from wise.cli.parser import command
-from wise.effects.base import Effect
+from wise.cli.parser import top_command
+from wise.effects.catalogue import NAMES, Entry, check_name, entry
 
 OUTSIDE_NOTE = "outside the declared range; rendered as authored"
 
@@ -17,11 +15,9 @@ def fmt(value: float) -> str:
     return f"{value:.6g}"
 
 
-def effect_table(effect: Effect) -> list[str]:
+def effect_table(effect: Entry) -> list[str]:
     """The lines ``wise effects NAME`` prints for ``effect``."""
-    doc = inspect.getdoc(type(effect)) or ""
-    title = doc.splitlines()[0] if doc else ""
-    lines = [f"{effect.name}: {title}" if title else effect.name, "  parameters:"]
+    lines = [f"{effect.name}: {effect.summary}" if effect.summary else effect.name, "  parameters:"]
     rows = [
         (s.name, f"[{fmt(s.min)}, {fmt(s.max)}]", f"default {fmt(s.default)}", s.description)
         for s in effect.param_specs
@@ -51,7 +47,7 @@ def _readme_number(value: float) -> str:
     return fmt(value).replace("-", "\N{MINUS SIGN}")
 
 
-def markdown_table(effect: Effect) -> str:
+def markdown_table(effect: Entry) -> str:
     """The parameter table of ``effect`` as the README shows it (``wise effects --markdown``)."""
     lines = ["| parameter | range | default | controls |", "| --- | --- | --- | --- |"]
     for s in effect.param_specs:
@@ -61,17 +57,19 @@ def markdown_table(effect: Effect) -> str:
 
 
 def run(args: argparse.Namespace, out: TextIO) -> int:
-    names = [args.effect] if args.effect else effects.available()
+    if args.effect:
+        check_name(args.effect)
+    names = [args.effect] if args.effect else NAMES
     if args.markdown:
-        blocks = [f"`{name}`\n\n{markdown_table(effects.create(name))}" for name in names]
+        blocks = [f"`{name}`\n\n{markdown_table(entry(name))}" for name in names]
     else:
-        blocks = ["\n".join(effect_table(effects.create(name))) for name in names]
+        blocks = ["\n".join(effect_table(entry(name))) for name in names]
     print("\n\n".join(blocks), file=out)
     return 0
 
 
 def register(commands: argparse._SubParsersAction) -> None:
-    show = command(commands, "effects", "list effects, their parameters and presets", writes=False)
+    show = top_command(commands, "effects")
     show.add_argument("effect", nargs="?", metavar="EFFECT", help="show this effect only")
     show.add_argument("--markdown", action="store_true", help="parameter tables in Markdown (as in the README)")
     show.set_defaults(func=run)

@@ -5,14 +5,23 @@ from __future__ import annotations
 import argparse
 from typing import TextIO
 
-from wise import effects
 from wise.cli import args as types
 from wise.cli.outputs import OutputFolder
-from wise.cli.parser import add_device, add_pixel_limit, add_size, command, device, exit_code
-from wise.optimize.parametric import LOSSES, MASK_SOFT_GRADIENTS, MODES, PYRAMIDS, Settings
-from wise.optimize.run import NST_METHODS, RESULT_FILES, TARGET_FILE, init_is_file
-from wise.optimize.run import run as run_optimization
-from wise.optimize.run import transfer as run_transfer
+from wise.cli.parser import add_device, add_pixel_limit, add_size, device, exit_code, top_command
+from wise.effects.catalogue import check_name, entry
+from wise.files import MAX_PARAMS_BYTES, PARAMS_WHAT, regular_file
+from wise.io import check_image_file
+from wise.optimize.settings import (
+    LOSSES,
+    MASK_SOFT_GRADIENTS,
+    MODES,
+    NST_METHODS,
+    PYRAMIDS,
+    RESULT_FILES,
+    TARGET_FILE,
+    Settings,
+    init_is_file,
+)
 
 
 def _settings(args: argparse.Namespace) -> Settings:
@@ -36,11 +45,26 @@ def _init_input(args: argparse.Namespace) -> str | None:
     return args.init if args.init is not None and init_is_file(args.init) else None
 
 
+def _check_inputs(args: argparse.Namespace, images: tuple[str | None, ...]) -> None:
+    """The images and ``--init`` as the run will find them (before PyTorch loads)."""
+    for image in images:
+        if image is not None:
+            check_image_file(image)
+    if args.init is not None:
+        if init_is_file(args.init):
+            regular_file(args.init, PARAMS_WHAT, MAX_PARAMS_BYTES)
+        else:
+            entry(args.effect).check_preset(args.init)
+
+
 def run_optimize(args: argparse.Namespace, out: TextIO) -> int:
-    effects.create(args.effect)
+    check_name(args.effect)
     settings = _settings(args)
     inputs = {"--content": args.content, "--target": args.target, "--init": _init_input(args)}
     folder = OutputFolder(args.output, RESULT_FILES, inputs)
+    _check_inputs(args, (args.content, args.target))
+    from wise.optimize.run import run as run_optimization
+
     options = _options(args, out)
     with folder.guard():
         outcome = run_optimization(args.effect, args.content, args.target, args.output, settings, **options)
@@ -48,10 +72,13 @@ def run_optimize(args: argparse.Namespace, out: TextIO) -> int:
 
 
 def run_transfer_command(args: argparse.Namespace, out: TextIO) -> int:
-    effects.create(args.effect)
+    check_name(args.effect)
     settings = _settings(args)
     inputs = {"--content": args.content, "--style": args.style, "--init": _init_input(args)}
     folder = OutputFolder(args.output, (*RESULT_FILES, TARGET_FILE), inputs)
+    _check_inputs(args, (args.content, args.style))
+    from wise.optimize.run import transfer as run_transfer
+
     options = _options(args, out)
     with folder.guard():
         outcome = run_transfer(
@@ -113,14 +140,14 @@ def _add_options(parser: argparse.ArgumentParser) -> None:
 
 
 def register(commands: argparse._SubParsersAction) -> None:
-    opt = command(commands, "optimize", "optimize parameters so that an effect re-creates a target image")
+    opt = top_command(commands, "optimize")
     opt.add_argument("effect", metavar="EFFECT", help="effect name (see 'wise effects')")
     opt.add_argument("--content", required=True, metavar="IMAGE", help="the photo to stylize")
     opt.add_argument("--target", required=True, metavar="IMAGE", help="the stylized reference to re-create")
     _add_options(opt)
     opt.set_defaults(func=run_optimize)
 
-    transfer = command(commands, "transfer", "neural style transfer, then re-create it with an effect")
+    transfer = top_command(commands, "transfer")
     transfer.add_argument("effect", metavar="EFFECT", help="effect name (see 'wise effects')")
     transfer.add_argument("--content", required=True, metavar="IMAGE", help="the photo to stylize")
     style = transfer.add_mutually_exclusive_group(required=True)

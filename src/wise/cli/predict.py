@@ -6,16 +6,13 @@ from __future__ import annotations
 import argparse
 from typing import TextIO
 
-from wise import effects
 from wise.cli import args as types
 from wise.cli.outputs import OutputFolder
-from wise.cli.parser import add_device, add_pixel_limit, command, device, exit_code
+from wise.cli.parser import add_device, add_pixel_limit, device, exit_code, top_command
+from wise.effects.catalogue import NO_EFFECT, check_name
 from wise.errors import WiseError
-from wise.optimize.parametric import MODES
-from wise.optimize.refine import DEFAULT_BUDGET
-from wise.ppn.modelfile import model_info, model_path
-from wise.ppn.translation import NO_EFFECT
-from wise.predict import MASKS_FILE, PREDICTED_FILE, RESULT_FILES, STAGE_FILE, predict_files, predict_local_files
+from wise.io import check_image_file
+from wise.optimize.settings import DEFAULT_BUDGET, MODES
 
 
 def run_predict(args: argparse.Namespace, out: TextIO) -> int:
@@ -23,7 +20,13 @@ def run_predict(args: argparse.Namespace, out: TextIO) -> int:
         if args.model is None:
             raise WiseError("the effect 'none' is a CNN alone: pass its --model (of 'wise train local none')")
     else:
-        effects.create(args.effect)
+        check_name(args.effect)
+    for image in (args.content, args.target):
+        if image is not None:
+            check_image_file(image)
+    from wise.ppn.modelfile import model_info, model_path
+    from wise.predict import MASKS_FILE, PREDICTED_FILE, RESULT_FILES, STAGE_FILE, predict_files, predict_local_files
+
     path = model_path(args.model, args.effect)
     kind = model_info(path, args.effect).kind
     model = None if args.model is None else str(path)
@@ -59,11 +62,7 @@ def run_predict(args: argparse.Namespace, out: TextIO) -> int:
 
 
 def register(commands: argparse._SubParsersAction) -> None:
-    parser = command(
-        commands,
-        "predict",
-        "predict the global parameters that re-create an example, or paint parameter masks with a local model",
-    )
+    parser = top_command(commands, "predict")
     parser.add_argument("effect", metavar="EFFECT", help="effect name (see 'wise effects'); none for a CNN-only model")
     parser.add_argument("--content", required=True, metavar="IMAGE", help="the photo")
     parser.add_argument(

@@ -16,7 +16,7 @@ import torch
 from wise import effects
 from wise.cli import args as types
 from wise.cli.outputs import OutputFolder
-from wise.cli.parser import add_pixel_limit, command, exit_code
+from wise.cli.parser import add_pixel_limit, command, exit_code, top_command
 from wise.errors import WiseError
 from wise.ppn import ARCHITECTURES
 from wise.ppn.postprocess import DEFAULT_WIDTH as POST_WIDTH
@@ -306,7 +306,7 @@ def _register_local(kinds: argparse._SubParsersAction) -> None:
 
 
 def register(commands: argparse._SubParsersAction) -> None:
-    train = command(commands, "train", "train parameter prediction networks", writes=False)
+    train = top_command(commands, "train")
     kinds = train.add_subparsers(dest="kind", metavar="KIND", required=True, parser_class=type(train))
     _register_local(kinds)
     parser = command(kinds, "global", "train a network that predicts an effect's global parameters from an example")

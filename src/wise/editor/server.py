@@ -18,6 +18,7 @@ from typing import TextIO
 from wise import effects
 from wise.editor.addresses import LOOPBACK, WILDCARD_ADDRESSES
 from wise.editor.session import EditorSession
+from wise.editor.start import check_start
 from wise.errors import WiseError
 from wise.files import MAX_PARAMS_BYTES, open_regular
 from wise.io import MAX_IMAGE_BYTES
@@ -43,12 +44,7 @@ def initial_session(
 ) -> EditorSession:
     """The state every browser session starts from, checked before the server starts; with
     ``model`` (a translator), results are its CNN's drawings of the effect's output."""
-    if model is not None and params is None:
-        raise WiseError("--model renders the masks it painted: pass them with --params (from 'wise predict')")
-    if params is not None and (effect is not None or preset is not None):
-        raise WiseError("--params comes with its own effect; leave out --effect and --preset")
-    if preset is not None and effect is None:
-        raise WiseError("--preset needs --effect, e.g. --effect watercolor --preset " + preset)
+    check_start(image, params, effect, preset, model)
     session = EditorSession()
     if params is not None:
         session.open_params(_read(params, "parameter file", MAX_PARAMS_BYTES), Path(params).name)

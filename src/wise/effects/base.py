@@ -9,6 +9,7 @@ import torch
 from torch import nn
 
 from wise import params as P
+from wise.effects.catalogue import Entry
 from wise.effects.recompute import recompute
 from wise.errors import WiseError, size_text
 from wise.filters._checks import REFERENCE_SHORT_SIDE
@@ -93,12 +94,12 @@ class Effect(nn.Module):
         return [s.name for s in self.param_specs]
 
     def spec(self, name: str) -> ParamSpec:
-        for s in self.param_specs:
-            if s.name == name:
-                return s
-        raise WiseError(
-            f"effect {self.name!r} has no parameter {name!r}; its parameters: {', '.join(self.param_names)}"
-        )
+        return self.declarations().spec(name)
+
+    @classmethod
+    def declarations(cls) -> Entry:
+        """The effect's parameters and presets as the catalogue holds them."""
+        return Entry(cls.name, "", cls.param_specs, cls.presets)
 
     def default_params(self) -> torch.Tensor:
         """The defaults as a ``(P,)`` normalized tensor."""
@@ -106,9 +107,7 @@ class Effect(nn.Module):
 
     def preset(self, name: str) -> torch.Tensor:
         """A preset as a ``(P,)`` normalized tensor."""
-        if name not in self.presets:
-            known = ", ".join(self.presets) or "none"
-            raise WiseError(f"effect {self.name!r} has no preset {name!r}; its presets: {known}")
+        self.declarations().check_preset(name)
         return P.from_dict(self.param_specs, self.presets[name])
 
     def params_from_dict(self, values: Mapping[str, float], preset: str | None = None) -> torch.Tensor:

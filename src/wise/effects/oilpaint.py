@@ -8,7 +8,8 @@ from typing import Mapping
 import torch
 
 from wise.effects.base import Effect, RenderContext
-from wise.effects.common import LUMINANCE_RANGE, WHITE_BALANCE, brightness_spec, colour_adjustments, detail_sigmas
+from wise.effects.catalogue import oilpaint as declared
+from wise.effects.common import LUMINANCE_RANGE, colour_adjustments, detail_sigmas
 from wise.filters import (
     adjust_color,
     coarse_structure_tensor,
@@ -26,7 +27,6 @@ from wise.filters.log import flow_log
 from wise.filters.noise import value_noise
 from wise.filters.shading import bump_phong
 from wise.filters.upsample import downsample, joint_bilateral_upsample
-from wise.params import ParamSpec
 
 FLOW_DERIVATIVE = 1.0
 """Derivative scale of the structure tensor (reference pixels)."""
@@ -109,57 +109,8 @@ class OilPaint(Effect):
     position_dependent = True
     guide_channels = 3
     tile_pixels = 5_000_000  # about 0.6 KB per pixel of intermediate images: within 4 GB at 4096²
-    param_specs = (
-        brightness_spec(-0.2, 0.3, 0.0),
-        ParamSpec("contrast", 0.5, 2.0, 1.1, "contrast of the input around mid-grey"),
-        ParamSpec("saturation", 0.0, 2.5, 1.2, "colour saturation"),
-        *WHITE_BALANCE,
-        ParamSpec("details", 0.0, 3.0, 1.5, "more detail: less colour abstraction"),
-        ParamSpec("stroke_length", 1.0, 12.0, 5.0, "length of the brush strokes along the flow"),
-        ParamSpec("brush_size", 0.3, 3.0, 0.8, "width of the bristle grooves across the strokes"),
-        ParamSpec("relief", 0.0, 3.0, 1.0, "height of the paint relief"),
-        ParamSpec("specular", 0.0, 1.0, 0.3, "strength of the highlights"),
-        ParamSpec("shininess", 2.0, 40.0, 12.0, "tightness of the highlights"),
-        ParamSpec("edge_enhancement", 0.0, 2.0, 0.5, "darkening and sharpening of edges"),
-    )
-    presets = {
-        "impasto": {
-            "brightness": 0.02,
-            "contrast": 1.1,
-            "saturation": 1.3,
-            "details": 1.2,
-            "stroke_length": 6.0,
-            "brush_size": 0.8,
-            "relief": 1.8,
-            "specular": 0.35,
-            "shininess": 14.0,
-            "edge_enhancement": 0.6,
-        },
-        "glaze": {
-            "brightness": 0.02,
-            "contrast": 1.0,
-            "saturation": 1.1,
-            "details": 2.0,
-            "stroke_length": 3.0,
-            "brush_size": 0.5,
-            "relief": 0.5,
-            "specular": 0.15,
-            "shininess": 25.0,
-            "edge_enhancement": 0.3,
-        },
-        "knife": {
-            "brightness": 0.03,
-            "contrast": 1.15,
-            "saturation": 1.25,
-            "details": 0.6,
-            "stroke_length": 10.0,
-            "brush_size": 2.0,
-            "relief": 1.0,
-            "specular": 0.45,
-            "shininess": 8.0,
-            "edge_enhancement": 0.4,
-        },
-    }
+    param_specs = declared.PARAMS
+    presets = declared.PRESETS
 
     def __init__(self, kernel_size: int = 3, checkpoint: bool = False, seed: int = 0) -> None:
         super().__init__(kernel_size, checkpoint)

@@ -10,20 +10,46 @@ atomically. The work is split between these modules:
 - :mod:`wise.io.read`: :func:`read_image`, :func:`decode_image_bytes`,
   :func:`image_to_tensor` and the decoding context around every read.
 - :mod:`wise.io.write`: :func:`tensor_to_image`, :func:`atomic_path`, :func:`write_image`.
+
+The formats and limits load with the package; the readers and writers, which need PyTorch, on
+first use, so that the command line checks file names and sizes before PyTorch loads.
 """
 
 from __future__ import annotations
 
-from wise.io.common import PathLike
+import importlib
+from typing import TYPE_CHECKING
+
+from wise.io.common import IMAGE_SUFFIXES, READ_FORMATS, WRITE_FORMATS, PathLike
 from wise.io.limits import (
     DEFAULT_MAX_PIXELS,
     MAX_IMAGE_BYTES,
     MAX_PIXELS_ENV,
     MAX_SAMPLES_PER_PIXEL,
+    check_image_file,
     pixel_limit,
 )
-from wise.io.read import IMAGE_SUFFIXES, READ_FORMATS, decode_image_bytes, image_to_tensor, read_image
-from wise.io.write import WRITE_FORMATS, atomic_path, tensor_to_image, write_image, write_together
+
+if TYPE_CHECKING:
+    from wise.io.read import decode_image_bytes, image_to_tensor, read_image
+    from wise.io.write import atomic_path, tensor_to_image, write_image, write_together
+
+_LAZY = {
+    "decode_image_bytes": "wise.io.read",
+    "image_to_tensor": "wise.io.read",
+    "read_image": "wise.io.read",
+    "atomic_path": "wise.io.write",
+    "tensor_to_image": "wise.io.write",
+    "write_image": "wise.io.write",
+    "write_together": "wise.io.write",
+}
+
+
+def __getattr__(name: str) -> object:
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'wise.io' has no attribute {name!r}")
+
 
 __all__ = [
     "DEFAULT_MAX_PIXELS",
@@ -35,6 +61,7 @@ __all__ = [
     "WRITE_FORMATS",
     "PathLike",
     "atomic_path",
+    "check_image_file",
     "write_together",
     "decode_image_bytes",
     "image_to_tensor",

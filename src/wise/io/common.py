@@ -1,10 +1,18 @@
-"""Pieces shared by the reading and the writing side: the path type and one-line error text."""
+"""Pieces shared by the reading and the writing side: the path type, the formats and one-line
+error text (no numerical library: the command line checks file names with them before loading any)."""
 
 from __future__ import annotations
 
 import os
 
 PathLike = str | os.PathLike[str]
+
+READ_FORMATS = {"PNG": "PNG", "JPEG": "JPEG", "WEBP": "WebP", "TIFF": "TIFF"}
+"""Pillow's names of the formats read, and how messages name them."""
+IMAGE_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".webp", ".tif", ".tiff"})
+"""File extensions taken for images (folders and patterns of inputs)."""
+WRITE_FORMATS = {".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG"}
+"""Extensions of the files written, with Pillow's format names."""
 
 
 def one_line(error: BaseException) -> str:

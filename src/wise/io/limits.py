@@ -19,6 +19,8 @@ MAX_PIXELS_ENV = "WISE_MAX_PIXELS"
 MAX_IMAGE_BYTES = 2 * 1000**3
 """Largest image file: a float32 RGBA TIFF at the default pixel limit is about 1 GB."""
 MAX_SAMPLES_PER_PIXEL = 8
+IMAGE_WHAT = "image"
+"""How messages name an image file."""
 """More samples per pixel than any photo has: a TIFF with more is refused before decoding."""
 
 
@@ -67,3 +69,12 @@ def check_pixels(shown: str, width: int, height: int, limit: int) -> None:
 def check_not_empty(shown: str, width: int, height: int) -> None:
     if width == 0 or height == 0:
         raise WiseError(f"{shown}: the image is empty ({size_text(width, height)} pixels)")
+
+
+def check_image_file(path: str | os.PathLike[str]) -> None:
+    """The checks :func:`wise.io.read_image` makes before opening ``path`` (it exists, is a
+    regular, readable file, not empty, at most :data:`MAX_IMAGE_BYTES`), with its messages, for
+    a command to make before it loads anything."""
+    from wise.files import regular_file
+
+    regular_file(path, IMAGE_WHAT, MAX_IMAGE_BYTES)

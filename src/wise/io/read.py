@@ -34,7 +34,7 @@ from PIL import Image, ImageOps, UnidentifiedImageError
 from wise.errors import WiseError
 from wise.files import check_size, open_regular
 from wise.io.arrays import to_float, to_rgb
-from wise.io.common import PathLike, one_line
+from wise.io.common import READ_FORMATS, PathLike, one_line
 from wise.io.formats import (
     SIXTEEN_BIT_MODES,
     TIFF_MAGIC,
@@ -44,13 +44,9 @@ from wise.io.formats import (
     tifffile_array,
     webp_size,
 )
-from wise.io.limits import MAX_IMAGE_BYTES, check_not_empty, check_pixels, resolve_limit
+from wise.io.limits import IMAGE_WHAT, MAX_IMAGE_BYTES, check_not_empty, check_pixels, resolve_limit
 
-READ_FORMATS = {"PNG": "PNG", "JPEG": "JPEG", "WEBP": "WebP", "TIFF": "TIFF"}
-IMAGE_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".webp", ".tif", ".tiff"})
-"""File name endings of the formats read, for commands that take a folder of images."""
-
-_WHAT = "image"
+_WHAT = IMAGE_WHAT
 _HEAD_BYTES = 64
 _DECODE_LOCK = threading.Lock()
 _DECODER_LOGGERS = ("PIL", "tifffile")

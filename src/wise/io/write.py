@@ -18,9 +18,7 @@ import torch
 from PIL import Image
 
 from wise.errors import WiseError
-from wise.io.common import PathLike, one_line
-
-WRITE_FORMATS = {".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG"}
+from wise.io.common import WRITE_FORMATS, PathLike, one_line
 
 
 def tensor_to_image(tensor: torch.Tensor) -> np.ndarray:

@@ -27,96 +27,23 @@ from wise.filters.color import rgb_to_lab
 from wise.filters.gaussian import gaussian_blur
 from wise.filters.smoothing import annealed_temperature, smoothed_steps, softened_gradients
 from wise.optimize.adam import Adam
+from wise.optimize.settings import PYRAMIDS, Settings
 from wise.params import NORMALIZED_MAX, NORMALIZED_MIN, check_params, clamp_masks
 from wise.vgg import StyleLoss, load_vgg19
 
-LOSSES = ("l1-lab", "l1", "l2", "nst")
 LAB_WEIGHT = 0.5
 """Weight of the CIE Lab term of the ``l1-lab`` loss (Lab divided by 100) beside L1 in RGB."""
-MODES = ("local", "global")
-MASK_SOFT_GRADIENTS = 0.5
-"""Surrogate-gradient softness of the steps in per-pixel descent by default
-(:func:`wise.filters.smoothing.softened_gradients`): a pixel inked black lies on the flat end of
-the XDoG threshold, so its masks get no gradient that would take the ink away; through a ramp
-widened this much they do. Global values see enough pixels on the slope to need none
-(BENCHMARKS.md, "Ink that per-pixel descent can take away")."""
 DECAY = 0.98
 DECAY_EVERY = 5
 DECAY_FROM = 50
 SMOOTH_AT = (10, 25, 50, 100, 250, 500)
 MASK_SMOOTHING_SIGMA = 1.0
 """Sigma (mask pixels) of the Gaussian applied to the masks at ``SMOOTH_AT``."""
-PYRAMIDS: dict[int, tuple[tuple[int, float, float], ...]] = {
-    1: ((1, 1.0, 1.0),),
-    2: ((2, 0.4, 1.0), (1, 0.6, 0.1)),
-    3: ((4, 2 / 7, 1.0), (2, 2 / 7, 0.5), (1, 3 / 7, 0.1)),
-}
-"""Coarse-to-fine schedules by number of levels: (reduction of the working size, share of
-the iterations, factor on the learning rate) per level, coarsest first."""
 CROP_SIZE = 128
 """Side of the random crop compared per iteration by :func:`optimize_on_crops` (pixels)."""
 CROP_CONTEXT = 24
 """Pixels rendered around a crop so that its filters see their neighbourhood; the loss
 ignores them."""
-
-
-@dataclass
-class Settings:
-    """How to optimize; see the module docstring."""
-
-    mode: str = "local"
-    iterations: int = 350
-    lr: float = 0.1
-    loss: str = "l1-lab"
-    tv_weight: float = 0.0
-    vgg_weights: str | None = None
-    """VGG-19 weights (safetensors) for the ``nst`` loss; default location when None."""
-    levels: int = 3
-    """Pyramid levels of :func:`pyramid` (1: every iteration at the working size)."""
-    time_limit: float | None = None
-    """Seconds the iterations and the final render may take (None: all of them are run): no
-    iteration starts that could end later, judged by the longest iteration and render so far;
-    annealing then follows the time spent as well as the iterations done, whichever is
-    further along."""
-    anneal: float = 0.0
-    """Step temperature at the first iteration (0 to 1), lowered to 0 by
-    :func:`wise.filters.smoothing.annealed_temperature` (graduated non-convexity); 0: none."""
-    held: tuple[str, ...] = ()
-    """Parameters descent leaves where they are (read off the example in closed form,
-    :mod:`wise.optimize.inversion`): their gradient is set to zero."""
-    soft_gradients: float | None = None
-    """Surrogate-gradient softness of the steps (0 to 1, :func:`wise.filters.smoothing.softened_gradients`):
-    the look renders exactly, its steps pass gradients as wider ramps. None: :data:`MASK_SOFT_GRADIENTS`
-    for per-pixel masks, 0 for global values."""
-
-    final_lr: float | None = None
-    """The learning rate at the end as a share of ``lr``, reached along a half cosine over the
-    progress (iterations or time, as the annealing): the noise of random crops then settles
-    instead of moving the answer at the last iterations. None: the paper's schedule."""
-
-    def __post_init__(self) -> None:
-        if self.mode not in MODES:
-            raise WiseError(f"unknown mode {self.mode!r}; use one of {', '.join(MODES)}")
-        if self.loss not in LOSSES:
-            raise WiseError(f"unknown loss {self.loss!r}; use one of {', '.join(LOSSES)}")
-        if self.iterations < 1:
-            raise WiseError(f"iterations must be at least 1, got {self.iterations}")
-        if not self.lr > 0:
-            raise WiseError(f"the learning rate must be positive, got {self.lr}")
-        if self.tv_weight < 0:
-            raise WiseError(f"the total-variation weight must be at least 0, got {self.tv_weight}")
-        if self.final_lr is not None and not 0 < self.final_lr <= 1:
-            raise WiseError(f"the final learning rate share must be in (0, 1], got {self.final_lr}")
-        if self.time_limit is not None and not self.time_limit > 0:
-            raise WiseError(f"the time limit must be positive, got {self.time_limit}")
-        if not 0.0 <= self.anneal <= 1.0:
-            raise WiseError(f"the annealing temperature must be from 0 to 1, got {self.anneal}")
-        if self.levels not in PYRAMIDS:
-            raise WiseError(f"levels must be one of {', '.join(map(str, PYRAMIDS))}, got {self.levels}")
-        if self.soft_gradients is None:
-            self.soft_gradients = MASK_SOFT_GRADIENTS if self.mode == "local" else 0.0
-        if not 0.0 <= self.soft_gradients <= 1.0:
-            raise WiseError(f"the gradient softness must be from 0 to 1, got {self.soft_gradients}")
 
 
 @dataclass

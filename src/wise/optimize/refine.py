@@ -22,6 +22,7 @@ from wise.effects.base import Effect
 from wise.errors import WiseError
 from wise.optimize.inversion import HELD_PARAMS, fit_quickly, read_after_descent, read_steps, readable_after_descent
 from wise.optimize.parametric import CROP_CONTEXT, Outcome, Settings, optimize_coarse_to_fine, optimize_on_crops
+from wise.optimize.settings import DEFAULT_BUDGET
 
 
 @dataclass(frozen=True)
@@ -49,9 +50,6 @@ LOCAL_LEVELS = (Level(256, 0.7, 1.0), Level(512, 0.3, 0.5))
 CROP_MARGIN = 2
 """A crop level works on crops only where the copy's short side is this many crops and their
 context or more; a smaller copy is descended whole."""
-DEFAULT_BUDGET = 8.0
-"""Seconds of refinement by default: with the interpreter's start, the prediction and the
-final rendering, ``wise predict`` then stays within about 15 s at 512 px on a 2-core CPU."""
 MAX_LEVEL_ITERATIONS = 400
 """Iterations of a level when its time share allows more (a small picture on a fast machine)."""
 REFINE_LR = 0.05

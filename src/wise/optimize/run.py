@@ -28,6 +28,7 @@ from wise.optimize.inversion import (
 )
 from wise.optimize.parametric import Outcome, Settings, closest, describe_levels, optimize_coarse_to_fine, pyramid
 from wise.optimize.report import write_animation, write_report
+from wise.optimize.settings import NST_METHODS, init_is_file
 from wise.paramfile import load_params, save_params
 from wise.render import render
 from wise.vgg import weights_file
@@ -35,12 +36,7 @@ from wise.vgg import weights_file
 ASPECT_TOLERANCE = 0.01
 """Relative aspect-ratio difference up to which a target is resized to the content."""
 ANIMATION_FRAMES = 40
-NST_METHODS = ("onnx", "gatys")
 PROGRESS_EVERY = 10
-RESULT_FILES = ("params.safetensors", "result.png", "metrics.json", "report.html", "optimization.gif")
-"""What :func:`run` writes into its folder, the resumable parameter file first."""
-TARGET_FILE = "target.png"
-"""The neural style transfer reference :func:`transfer` adds."""
 
 
 def create_effect(name: str, seed: int) -> Effect:
@@ -112,11 +108,6 @@ class Progress:
             f"iteration {iteration}/{total}  level {level_index + 1}/{len(self.levels)} "
             f"({size_text(width, height)})  loss {loss:.5f}  about {left:.0f} s left"
         )
-
-
-def init_is_file(init: str) -> bool:
-    """Whether ``--init`` names a parameter file rather than a preset."""
-    return init.endswith(".safetensors") or Path(init).exists()
 
 
 def initial_params(effect: Effect, init: str | None) -> torch.Tensor:

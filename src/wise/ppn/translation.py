@@ -16,6 +16,7 @@ from torch import nn
 
 from wise import effects
 from wise.effects.base import Effect
+from wise.effects.catalogue import NO_EFFECT
 from wise.errors import WiseError
 from wise.ppn.postprocess import DEFAULT_WIDTH, POST_NETWORKS, create_post
 from wise.ppn.unet import LocalPPN
@@ -24,8 +25,6 @@ ARCHITECTURE = "translator"
 """The architecture name of a translator in model files."""
 PPN_KINDS = ("local", "preset")
 """``local``: masks painted by a local PPN; ``preset``: the effect's fixed preset everywhere."""
-NO_EFFECT = "none"
-"""The effect name of a CNN alone (no effect, no PPN)."""
 NO_POST = "none"
 POST_KINDS = (*POST_NETWORKS, NO_POST)
 

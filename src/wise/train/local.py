@@ -174,8 +174,9 @@ class LocalGAN(L.LightningModule):
 
     def validation_step(self, batch: Mapping[str, Any], batch_index: int) -> None:
         masks, _, made = self.generate(batch)
-        self.log("val_l1", (made - batch["target"]).abs().mean(), prog_bar=True, sync_dist=True)
-        self.log("val_tv", self._mask_variation(masks), sync_dist=True)
+        size = batch["target"].shape[0]
+        self.log("val_l1", (made - batch["target"]).abs().mean(), prog_bar=True, sync_dist=True, batch_size=size)
+        self.log("val_tv", self._mask_variation(masks), sync_dist=True, batch_size=size)
 
     def configure_optimizers(self) -> Any:
         total = self.trainer.estimated_stepping_batches if self._trainer is not None else 0

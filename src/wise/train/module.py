@@ -91,8 +91,9 @@ class GlobalPPN(L.LightningModule):
 
     def validation_step(self, batch: dict[str, torch.Tensor], batch_index: int) -> None:
         loss, param_l1 = self._losses(batch)
-        self.log("val_loss", loss, prog_bar=True, sync_dist=True)
-        self.log("val_param_l1", param_l1, sync_dist=True)
+        size = batch["photo"].shape[0]
+        self.log("val_loss", loss, prog_bar=True, sync_dist=True, batch_size=size)
+        self.log("val_param_l1", param_l1, sync_dist=True, batch_size=size)
 
     def configure_optimizers(self) -> Any:
         optimizer = torch.optim.Adam(self.network.parameters(), lr=self.lr)

@@ -25,9 +25,10 @@ import atexit
 import hashlib
 import os
 from pathlib import Path
-from typing import Callable
 
 import torch
+
+from wise.notices import take_compilation_announcer
 
 ENVIRONMENT_VARIABLE = "WISE_KERNELS"
 """``torch`` selects the PyTorch path everywhere; ``fused`` (or unset) the fused kernels on the CPU."""
@@ -73,10 +74,9 @@ COMPILE_NOTICE = (
     "compiling the CPU kernels on first use (a few seconds per effect, once: they are cached on disk; "
     "`python -m wise.effects.compile` compiles them ahead)"
 )
-"""What :func:`announce_compilation` prints when the kernels of this version were never compiled here
-(not ahead by :mod:`wise.effects.compile`, nor by an earlier command)."""
-
-_announce: Callable[[str], None] | None = None
+"""What the printer of :func:`wise.notices.announce_compilation` gets when the kernels of this
+version were never compiled here (not ahead by :mod:`wise.effects.compile`, nor by an earlier
+command)."""
 
 
 def kernels_version() -> str:
@@ -94,17 +94,8 @@ def warm_marker() -> Path:
     return base / "wise" / f"kernels-{kernels_version()}"
 
 
-def announce_compilation(print_line: Callable[[str], None]) -> None:
-    """Have ``print_line`` called once with :data:`COMPILE_NOTICE` when this process first uses a
-    kernel while the kernels of this version have not been compiled ahead (:func:`warm_marker`),
-    so that a command does not wait silently."""
-    global _announce
-    _announce = print_line
-
-
 def _announce_if_cold() -> None:
-    global _announce
-    announce, _announce = _announce, None
+    announce = take_compilation_announcer()
     if announce is not None and not warm_marker().exists():
         announce(COMPILE_NOTICE)
         atexit.register(_mark_warm)  # the next command loads what this one compiled
