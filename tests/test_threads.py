@@ -59,12 +59,18 @@ def test_importing_wise_first_sizes_pytorch_to_the_usable_cores() -> None:
 
 
 def test_the_command_line_takes_a_thread_count(monkeypatch: pytest.MonkeyPatch, capsys) -> None:
+    import torch
+
     from wise.cli import main
 
     monkeypatch.delenv(THREADS_VARIABLE, raising=False)
     monkeypatch.setenv("OMP_NUM_THREADS", os.environ.get("OMP_NUM_THREADS", "1"))
-    assert main(["--threads", "1", "effects", "xdog"]) == 0
-    assert os.environ[THREADS_VARIABLE] == "1"
+    threads = torch.get_num_threads()
+    try:
+        assert main(["--threads", "1", "effects", "xdog"]) == 0
+        assert os.environ[THREADS_VARIABLE] == "1" and torch.get_num_threads() == 1
+    finally:
+        torch.set_num_threads(threads)
     assert main(["--threads", "0", "effects"]) == 2
     assert "--threads" in capsys.readouterr().err
     monkeypatch.setenv(THREADS_VARIABLE, "none")

@@ -13,8 +13,10 @@ import importlib
 from typing import TYPE_CHECKING
 
 from wise._openmp import prefer_passive_waiting
+from wise.threads import prefer_usable_cores
 
 prefer_passive_waiting()  # before anything imports torch
+prefer_usable_cores()
 
 from wise.errors import WiseError  # noqa: E402
 

@@ -120,7 +120,7 @@ def test_same_files_as_the_local_path(
 ) -> None:
     """Ray started here (2 cores) and stopped after; every result byte for byte the local one,
     the corrupt image reported by name, one log line per image."""
-    monkeypatch.setattr(distributed, "_machine_cores", lambda: 2)
+    monkeypatch.setattr(distributed, "usable_cores", lambda: 2)
     was_running = ray.is_initialized()
     out = tmp_path / "out"
     jobs = plan([str(photos)], out)

@@ -31,8 +31,11 @@ def _cases(folder: Path) -> dict[str, tuple[list[str], int, str]]:
         "effects": (["effects"], 0, "watercolor:"),
         "one effect": (["effects", "oilpaint"], 0, "stroke_length"),
         "missing file": (["apply", "xdog", missing, "-o", out], 2, "no such file"),
-        "a directory for an image": (["optimize", "xdog", "--content", str(folder), "--target", str(photo), "-o",
-                                      str(folder / "o")], 2, "is a directory"),  # fmt: skip
+        "a directory for an image": (
+            ["optimize", "xdog", "--content", str(folder), "--target", str(photo), "-o", str(folder / "o")],
+            2,
+            "is a directory",
+        ),  # fmt: skip
         "an empty file": (["apply", "cartoon", str(empty), "-o", out], 2, "the file is empty"),
         "unknown effect": (["apply", "oil", str(photo), "-o", out], 2, "unknown effect 'oil'"),
         "unknown preset": (["apply", "xdog", "--preset", "pen", str(photo), "-o", out], 2, "no preset 'pen'"),
@@ -40,15 +43,38 @@ def _cases(folder: Path) -> dict[str, tuple[list[str], int, str]]:
         "value out of range": (["apply", "xdog", "--set", "details=9", str(photo), "-o", out], 2, "outside the range"),
         "not a number": (["apply", "xdog", "--set", "details=much", str(photo), "-o", out], 2, "is not a number"),
         "bad option value": (["apply", "xdog", "--kernel-size", "0", str(photo), "-o", out], 2, "--kernel-size"),
-        "unwritable output": (["apply", "xdog", str(photo), "-o", str(folder / "no" / "such" / "out.png")], 2,
-                              "wise: error:"),  # fmt: skip
+        "unwritable output": (
+            ["apply", "xdog", str(photo), "-o", str(folder / "no" / "such" / "out.png")],
+            2,
+            "wise: error:",
+        ),  # fmt: skip
         "output format": (["apply", "xdog", str(photo), "-o", str(folder / "out.gif")], 2, ".gif"),
-        "options that exclude each other": (["apply", "xdog", "--preset", "sketch", "--params", str(photo), str(photo),
-                                             "-o", out], 2, "cannot be combined"),  # fmt: skip
-        "transfer's start": (["transfer", "xdog", "--content", str(photo), "--builtin-style", "1", "--init", "pen",
-                              "-o", str(folder / "t")], 2, "no preset 'pen'"),  # fmt: skip
-        "predict's example": (["predict", "cartoon", "--content", str(photo), "--target", missing, "-o",
-                               str(folder / "p")], 2, "no such file"),  # fmt: skip
+        "options that exclude each other": (
+            ["apply", "xdog", "--preset", "sketch", "--params", str(photo), str(photo), "-o", out],
+            2,
+            "cannot be combined",
+        ),  # fmt: skip
+        "transfer's start": (
+            [
+                "transfer",
+                "xdog",
+                "--content",
+                str(photo),
+                "--builtin-style",
+                "1",
+                "--init",
+                "pen",
+                "-o",
+                str(folder / "t"),
+            ],
+            2,
+            "no preset 'pen'",
+        ),  # fmt: skip
+        "predict's example": (
+            ["predict", "cartoon", "--content", str(photo), "--target", missing, "-o", str(folder / "p")],
+            2,
+            "no such file",
+        ),  # fmt: skip
         "the editor's start": (["edit", "--preset", "sketch"], 2, "--preset needs --effect"),
     }
 

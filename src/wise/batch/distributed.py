@@ -48,6 +48,7 @@ from wise.interrupt import ctrl_c
 from wise.io import MAX_PIXELS_ENV
 from wise.io.common import one_line
 from wise.ppn.modelfile import BUILTIN_PREFIX
+from wise.threads import usable_cores
 
 if TYPE_CHECKING:
     import numpy as np
@@ -194,13 +195,6 @@ def _actor_pool(ray: Any, actors: int) -> Any:
         return ray.data.ActorPoolStrategy(size=actors)
 
 
-def _machine_cores() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        return os.cpu_count() or 1
-
-
 def _check_reachable(address: str) -> None:
     """A clear error at once for a ``HOST:PORT`` where nothing listens (Ray itself retries for
     minutes); other forms (``auto``) are left to Ray."""
@@ -223,7 +217,7 @@ def _connect(ray: Any, address: str | None) -> None:
         return
     quiet = {"logging_level": logging.ERROR, "log_to_driver": False}
     if address is None:
-        ray.init(num_cpus=_machine_cores(), include_dashboard=False, **quiet)
+        ray.init(num_cpus=usable_cores(), include_dashboard=False, **quiet)
         return
     _check_reachable(address)
     try:

@@ -17,6 +17,7 @@ import warnings
 from typing import Sequence, TextIO
 
 from wise import __version__
+from wise.cli import args as types
 from wise.cli.parser import (
     COMMANDS,
     EXIT_FAILURE,
@@ -30,6 +31,7 @@ from wise.cli.parser import (
 from wise.errors import WiseError, WiseWarning
 from wise.io import MAX_PIXELS_ENV
 from wise.notices import announce_compilation
+from wise.threads import THREADS_VARIABLE, thread_count, use_threads
 
 
 def build_parser(chosen: str | None = None) -> argparse.ArgumentParser:
@@ -40,6 +42,12 @@ def build_parser(chosen: str | None = None) -> argparse.ArgumentParser:
         prog=PROG, description="Whitebox image stylization: differentiable effects with editable parameters."
     )
     parser.add_argument("--version", action="version", version=f"{PROG} {__version__}")
+    parser.add_argument(
+        "--threads",
+        type=types.thread_count,
+        metavar="N",
+        help=f"threads to compute on (default: the cores this process may use, or ${THREADS_VARIABLE})",
+    )
     commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     wanted = COMMANDS[chosen][0] if chosen in COMMANDS else None
     for name, (module, help, _) in COMMANDS.items():
@@ -51,9 +59,15 @@ def build_parser(chosen: str | None = None) -> argparse.ArgumentParser:
 
 
 def chosen_command(argv: Sequence[str]) -> str | None:
-    """The command named in ``argv``: its first word that is not an option (the ``wise`` command's
-    own options take no values)."""
-    return next((word for word in argv if not word.startswith("-")), None)
+    """The command named in ``argv``: its first word that is neither an option of the ``wise``
+    command nor the value of ``--threads``."""
+    words = iter(argv)
+    for word in words:
+        if word == "--threads":
+            next(words, None)
+        elif not word.startswith("-"):
+            return word
+    return None
 
 
 def _error(message: str, err: TextIO) -> None:
@@ -110,6 +124,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         return e.code if isinstance(e.code, int) else (0 if e.code is None else EXIT_USAGE)
     except KeyboardInterrupt:
         return EXIT_INTERRUPTED
+    try:
+        if args.threads is not None:
+            use_threads(args.threads)
+        else:
+            thread_count()  # a bad $WISE_THREADS is refused before any work
+    except WiseError as e:
+        _error(str(e), sys.stderr)
+        return EXIT_USAGE
     previous_limit = apply_pixel_limit(args)
     announce_compilation(lambda line: print(f"{PROG}: {line}", file=sys.stderr, flush=True))
     try:

@@ -13,6 +13,8 @@ import math
 from dataclasses import dataclass
 from typing import Callable
 
+from wise.threads import MAX_THREADS
+
 MAX_SEED = 2**63 - 1
 """Largest seed: torch's generators take a signed 64-bit integer."""
 MAX_WORKING_SIZE = 4096
@@ -83,6 +85,7 @@ trials = whole_number(1, MAX_TRIALS)
 kernel_size = whole_number(1, MAX_KERNEL_SIZE)
 quality = whole_number(1, 100)
 port = whole_number(1, 65535)
+thread_count = whole_number(1, MAX_THREADS)
 pixel_limit = whole_number(1, MAX_PIXEL_LIMIT)
 training_seed = whole_number(0, 2**32 - 1)
 """A training run's seed (Lightning seeds every generator from a 32-bit value)."""
