@@ -14,10 +14,11 @@ uses the threads :mod:`wise.threads` gives it (``WISE_THREADS`` overrides).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import multiprocessing
 import statistics
 import time
-from typing import Callable
+from typing import Callable, Iterator
 
 import torch
 import torch.nn.functional as F
@@ -31,6 +32,22 @@ from wise.render import render
 def _spin(stop) -> None:  # noqa: ANN001 (a multiprocessing event)
     while not stop.is_set():
         sum(range(10_000))
+
+
+@contextlib.contextmanager
+def busy(processes: int) -> Iterator[None]:
+    """``processes`` other processes keeping a core busy each while the block runs."""
+    stop = multiprocessing.Event()
+    spinners = [multiprocessing.Process(target=_spin, args=(stop,), daemon=True) for _ in range(processes)]
+    for spinner in spinners:
+        spinner.start()
+    try:
+        time.sleep(0.5)
+        yield
+    finally:
+        stop.set()
+        for spinner in spinners:
+            spinner.join()
 
 
 def median_seconds(fn: Callable[[], object], repeat: int) -> float:
@@ -68,18 +85,9 @@ def main() -> None:
     print("| --- | --- | --- | --- |")
     for name, job in jobs.items():
         quiet = median_seconds(job, args.repeat)
-        stop = multiprocessing.Event()
-        spinners = [multiprocessing.Process(target=_spin, args=(stop,), daemon=True) for _ in range(args.busy)]
-        for spinner in spinners:
-            spinner.start()
-        try:
-            time.sleep(0.5)
-            busy = median_seconds(job, args.repeat)
-        finally:
-            stop.set()
-            for spinner in spinners:
-                spinner.join()
-        print(f"| {name} | {quiet * 1000:.0f} ms | {busy * 1000:.0f} ms | ×{busy / quiet:.2f} |", flush=True)
+        with busy(args.busy):
+            loaded = median_seconds(job, args.repeat)
+        print(f"| {name} | {quiet * 1000:.0f} ms | {loaded * 1000:.0f} ms | ×{loaded / quiet:.2f} |", flush=True)
 
 
 if __name__ == "__main__":

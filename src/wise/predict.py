@@ -103,6 +103,7 @@ def predict_files(
             "seconds": round(outcome.seconds, 2),
             "mode": refine_mode,
             "answers": len(scored),
+            "left_out": list(outcome.left_out),
             "kept": kept,
             "descent_kept": descended,
         }
@@ -126,6 +127,10 @@ def predict_files(
     if refined is not None:
         verdict = "kept" if refined["kept"] else "not kept (the network alone scored higher)"
         how = f", refined for {refined['seconds']:.1f} s ({refined['iterations']} iterations, {verdict})"
+        if refined["left_out"]:
+            how += f", {' and '.join(refined['left_out'])} left out to fit the budget at this machine's speed"
+        if refined["iterations"] == 0:
+            how += "; no descent: the readings took the budget (a larger --budget gives it time)"
     print(
         f"predicted in {seconds:.2f} s with {predictor.info.source}{how}: ssim {scores['ssim']:.4f}  "
         f"psnr {scores['psnr']:.2f} dB  l1 {scores['l1']:.4f}; result: {folder / 'result.png'}",

@@ -158,3 +158,38 @@ def test_local_refinement_paints_masks_on_whole_copies(photo: torch.Tensor) -> N
     outcome = refine(effect, photo, example, effect.default_params()[None], budget=5.0, mode="local", max_iterations=4)
     assert outcome.params.shape == (1, len(effect.param_names), *photo.shape[-2:])
     assert len(outcome.losses) == 4 and outcome.result is not None
+
+
+def test_a_slow_reading_leaves_the_colour_fit_out_and_descent_its_time(
+    photo: torch.Tensor, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """On a busy machine the readings slow down as much as descent: a fit planned from the reading's
+    own time that would take most of the budget is left out, said so, and descent still runs."""
+    import time
+
+    from wise.optimize import refine as module
+
+    effect = wise.effects.create("cartoon")
+    start = effect.default_params()
+    fitted: list[bool] = []
+
+    def reading(delay: float):
+        def read(effect, content, target, given, side):  # noqa: ANN001, ANN202 (read_steps' signature)
+            time.sleep(delay)
+            return given, ()
+
+        return read
+
+    def fit(effect, content, target, params, side):  # noqa: ANN001, ANN202 (fit_quickly's signature)
+        fitted.append(True)
+        return params
+
+    monkeypatch.setattr(module, "fit_quickly", fit)
+    monkeypatch.setattr(module, "read_after_descent", lambda *args: [])
+    monkeypatch.setattr(module, "read_steps", reading(0.0))
+    quick = refine(effect, photo, photo, start, budget=3.0, max_iterations=3)
+    assert fitted == [True] and quick.left_out == ()
+    monkeypatch.setattr(module, "read_steps", reading(0.4))  # 0.4 s x (1 + 5) > half of 3 s
+    slow = refine(effect, photo, photo, start, budget=3.0, max_iterations=3)
+    assert fitted == [True] and slow.left_out == ("the colour fit",)
+    assert len(slow.losses) == 3 and slow.seconds <= 3.0 + 0.5

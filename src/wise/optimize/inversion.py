@@ -1007,6 +1007,11 @@ _QUICK_FITS: dict[str, Callable[[Effect, torch.Tensor, torch.Tensor, torch.Tenso
 }
 
 
+def fits_quickly(effect: Effect) -> bool:
+    """Whether :func:`fit_quickly` has a fit for ``effect``."""
+    return getattr(effect, "name", None) in _QUICK_FITS
+
+
 def fit_quickly(
     effect: Effect, content: torch.Tensor, example: torch.Tensor, params: torch.Tensor, side: int = WORKING_SIDE
 ) -> torch.Tensor:

@@ -64,6 +64,9 @@ class Outcome:
     """Answers read off the target once descent ended, from where it ended (the refinement's
     :func:`~wise.optimize.inversion.read_after_descent`): steps and ink that descent cannot move
     across their staircases, which the callers judge beside ``params``."""
+    left_out: tuple[str, ...] = ()
+    """Steps of a time-bounded refinement left out because the budget, at the speed the machine
+    showed, had no room for them (e.g. ``"the colour fit"``)."""
 
 
 def image_distance(kind: str, output: torch.Tensor, target: torch.Tensor) -> torch.Tensor:

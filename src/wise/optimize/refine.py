@@ -20,7 +20,14 @@ import torch.nn.functional as F
 
 from wise.effects.base import Effect
 from wise.errors import WiseError
-from wise.optimize.inversion import HELD_PARAMS, fit_quickly, read_after_descent, read_steps, readable_after_descent
+from wise.optimize.inversion import (
+    HELD_PARAMS,
+    fit_quickly,
+    fits_quickly,
+    read_after_descent,
+    read_steps,
+    readable_after_descent,
+)
 from wise.optimize.parametric import CROP_CONTEXT, Outcome, Settings, optimize_coarse_to_fine, optimize_on_crops
 from wise.optimize.settings import DEFAULT_BUDGET
 
@@ -78,6 +85,18 @@ SETTLE_SECONDS = 1.0
 """Seconds kept back at the end of the budget for the readings after descent
 (:func:`wise.optimize.inversion.read_after_descent`): the cartoon's steps and outlines take about
 0.8 s at 512 pixels on a 2-core CPU."""
+READING_SHARE = 0.5
+"""Most of the budget the readings before descent may take: a reading that would take more is
+left out, so that descent keeps at least the rest (a busy machine slows both alike)."""
+FIT_PER_READING = 5.0
+"""The quick fit of the colours (:func:`~wise.optimize.inversion.fit_quickly`) takes about this
+many times the steps' reading before it (cartoon at 512 pixels: 2.3 s against 0.47 s on a quiet
+2-core CPU, 7.7 s against 1.1 s beside two busy processes), so its cost is planned from what the
+reading took on the machine as it is now."""
+SETTLE_PER_READING = 2.0
+"""The readings after descent take up to this many times the steps' reading before it (cartoon:
+0.9 s against 0.47 s quiet, 1.6 s against 1.1 s busy): the time kept back for them, at least
+:data:`SETTLE_SECONDS`."""
 RENDER_SHARE = 1.5
 """An iteration and the level's final render take about this many iterations' time: a level
 starts only when that much of the budget is left (estimated from the level before, per pixel)."""
@@ -150,18 +169,24 @@ def refine(
     # the staircase parameters read off the example, within the budget
     params, held, read = start, (), None
     reading = start.dim() <= 2 and budget >= INVERSION_MIN_BUDGET  # global parameters, time to read
+    reading_seconds = 0.0
+    left_out: list[str] = []
     if reading:
         given = start.reshape(1, -1)
         params, held = read_steps(effect, content, target, given, side=INVERSION_SIDE)
+        reading_seconds = time.perf_counter() - began
         if not torch.equal(params, given.to(params)):
             # held even where the example left the count open: in a budget of seconds, descent
             # from a network's start trades a count read rightly for a smooth look of two or
             # three soft levels, and has no time to find the example's from there (BENCHMARKS.md,
             # "The count held in the refinement")
             held = HELD_PARAMS.get(getattr(effect, "name", ""), held)
-        # the cartoon's colours fitted to the levels read, on a sample of pixels (half a second):
-        # descent from a tone curve that fits but is not the example's trades one for another
-        params = fit_quickly(effect, content, target, params, side=INVERSION_SIDE)
+        # the cartoon's colours fitted to the levels read, on a sample of pixels: descent from a
+        # tone curve that fits but is not the example's trades one for another
+        if reading_seconds * (1.0 + FIT_PER_READING) <= READING_SHARE * budget:
+            params = fit_quickly(effect, content, target, params, side=INVERSION_SIDE)
+        elif fits_quickly(effect):
+            left_out.append("the colour fit")
         read = None if torch.equal(params, start.reshape(params.shape)) else params
     losses: list[float] = []
     outcome: Outcome | None = None
@@ -169,7 +194,7 @@ def refine(
     # the plateaus left open or read wrongly shows, one descent cannot move across the staircase
     # (BENCHMARKS.md, "Readings after descent")
     settling = reading and readable_after_descent(effect)
-    kept_back = SETTLE_SECONDS if settling else 0.0
+    kept_back = max(SETTLE_SECONDS, SETTLE_PER_READING * reading_seconds) if settling else 0.0
     seconds_per_pixel = 0.0  # of an iteration and a render at the level before
     for index, level in enumerate(plan):
         factor = level.side / min(content.shape[-2:])
@@ -207,5 +232,11 @@ def refine(
     if settling and not (outcome is not None and outcome.interrupted):
         settled = tuple(read_after_descent(effect, content, target, params))
     if outcome is None:
-        return Outcome(params=params.detach().clone(), seconds=time.perf_counter() - began, read=read, settled=settled)
-    return replace(outcome, losses=losses, seconds=time.perf_counter() - began, read=read, settled=settled)
+        return Outcome(
+            params=params.detach().clone(), seconds=time.perf_counter() - began, read=read, settled=settled,
+            left_out=tuple(left_out),
+        )  # fmt: skip
+    return replace(
+        outcome, losses=losses, seconds=time.perf_counter() - began, read=read, settled=settled,
+        left_out=tuple(left_out),
+    )  # fmt: skip
