@@ -438,3 +438,16 @@ def test_masks_start_from_no_more_ink_and_no_harder_steps_than_the_start_as_give
     xdog = effects.create("xdog")
     start = xdog.default_params().reshape(1, -1)
     assert inversion.undoable_starts(xdog, content, [start], start)[0] is start
+
+
+def test_the_quick_colour_fit_stops_at_its_deadline(astronaut: torch.Tensor) -> None:
+    import time
+
+    cartoon, content, truth, example = _example(
+        astronaut, "cartoon", 128, bins=6.0, softness=0.05, brightness=0.15, contrast=1.6, saturation=0.5
+    )
+    start = _with(cartoon, truth, brightness=-0.1, contrast=1.0, saturation=1.5)
+    began = time.perf_counter()
+    late = colours_from_levels(cartoon, content, example, start, deadline=began)  # already past: no step
+    assert torch.equal(late, start)
+    assert not torch.equal(colours_from_levels(cartoon, content, example, start), start)

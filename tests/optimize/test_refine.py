@@ -180,7 +180,7 @@ def test_a_slow_reading_leaves_the_colour_fit_out_and_descent_its_time(
 
         return read
 
-    def fit(effect, content, target, params, side):  # noqa: ANN001, ANN202 (fit_quickly's signature)
+    def fit(effect, content, target, params, side, deadline):  # noqa: ANN001, ANN202 (fit_quickly's signature)
         fitted.append(True)
         return params
 

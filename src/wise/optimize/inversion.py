@@ -40,6 +40,7 @@ open is settled by a short discrete search (each candidate descended briefly on 
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field
 from typing import Callable, NamedTuple
 
@@ -355,7 +356,11 @@ def fit_colours_to_levels(
 
 
 def colours_from_levels(
-    effect: Effect, content: torch.Tensor, example: torch.Tensor, params: torch.Tensor
+    effect: Effect,
+    content: torch.Tensor,
+    example: torch.Tensor,
+    params: torch.Tensor,
+    deadline: float | None = None,
 ) -> torch.Tensor:
     """:func:`fit_colours_to_levels` in a fraction of a second: the content is abstracted once,
     before any colour adjustment (the bilateral filter smooths much as it would after them), and
@@ -363,7 +368,8 @@ def colours_from_levels(
     pixels, each iteration adjusting those colours alone. The abstraction's dependence on the
     adjustments is left out, so this reads the tone at the resolution it is given and is a
     start to be judged, not an answer. ``params`` ``(1, P)`` unchanged where too few plateau
-    pixels show the levels."""
+    pixels show the levels. With ``deadline`` (a :func:`time.perf_counter` value) the descent stops
+    there, however far it got."""
     targets = _level_targets(effect, example, params)
     if targets is None:
         return params
@@ -383,6 +389,8 @@ def colours_from_levels(
     fitted = params.detach()[0, indices].clone().requires_grad_()
     optimizer = Adam([fitted], lr=LEVEL_FIT_LR)
     for _ in range(LEVEL_FIT_ITERATIONS):  # callers may hold autograd off; this descent needs it
+        if deadline is not None and time.perf_counter() > deadline:
+            break
         optimizer.zero_grad(set_to_none=True)
         with torch.enable_grad():
             real = (fitted - NORMALIZED_MIN) * spans + lows
@@ -990,19 +998,21 @@ def read_starts(
 
 
 def _cartoon_colours_quickly(
-    effect: Effect, content: torch.Tensor, example: torch.Tensor, params: torch.Tensor
+    effect: Effect, content: torch.Tensor, example: torch.Tensor, params: torch.Tensor, deadline: float | None
 ) -> torch.Tensor:
     """``params`` with the colour adjustments fitted by :func:`colours_from_levels`, and the
     outlines' threshold read again at them at the width as it stands (the ink is read off the
     adjusted luminance; :func:`_cartoon_colours` reads every width, seconds), where that renders
     closer at this size."""
-    fitted = colours_from_levels(effect, content, example, params)
+    fitted = colours_from_levels(effect, content, example, params, deadline)
+    if deadline is not None and time.perf_counter() > deadline:
+        return fitted
     with torch.no_grad():
         outlines = _cartoon_outlines(effect, content, example, fitted, all_widths=False)
     return closest(effect, content, example, [fitted, _with(effect, fitted, **outlines)]) if outlines else fitted
 
 
-_QUICK_FITS: dict[str, Callable[[Effect, torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor]] = {
+_QUICK_FITS: dict[str, Callable[[Effect, torch.Tensor, torch.Tensor, torch.Tensor, float | None], torch.Tensor]] = {
     "cartoon": _cartoon_colours_quickly,
 }
 
@@ -1013,20 +1023,27 @@ def fits_quickly(effect: Effect) -> bool:
 
 
 def fit_quickly(
-    effect: Effect, content: torch.Tensor, example: torch.Tensor, params: torch.Tensor, side: int = WORKING_SIDE
+    effect: Effect,
+    content: torch.Tensor,
+    example: torch.Tensor,
+    params: torch.Tensor,
+    side: int = WORKING_SIDE,
+    deadline: float | None = None,
 ) -> torch.Tensor:
     """``params`` (normalized ``(1, P)``) with the parameters that the steps read make smooth fitted
     within about a second, where a refinement of seconds has no time for :func:`read_starts`'
     fit (cartoon: the colour adjustments, :func:`colours_from_levels`, and the outlines' threshold
     read again at them, on copies whose short side is ``side``); kept where its render at up to
-    :data:`JUDGE_SIDE` pixels fits ``example`` better. Unchanged for effects without such a fit."""
+    :data:`JUDGE_SIDE` pixels fits ``example`` better. Unchanged for effects without such a fit.
+    With ``deadline`` (a :func:`time.perf_counter` value) the fit stops there with what it has,
+    which is then judged as before."""
     fit = _QUICK_FITS.get(getattr(effect, "name", ""))
     if fit is None:
         return params
     small_content = _working_copy(content.detach(), side)
     small_example = _working_copy(example.detach(), side).to(small_content)
     given = params.detach().reshape(1, -1).to(small_content)
-    fitted = fit(effect, small_content, small_example, given)
+    fitted = fit(effect, small_content, small_example, given, deadline)
     if torch.equal(fitted, given):
         return params
     judged_content = _working_copy(content.detach(), max(side, JUDGE_SIDE))

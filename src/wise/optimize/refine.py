@@ -86,8 +86,9 @@ SETTLE_SECONDS = 1.0
 (:func:`wise.optimize.inversion.read_after_descent`): the cartoon's steps and outlines take about
 0.8 s at 512 pixels on a 2-core CPU."""
 READING_SHARE = 0.5
-"""Most of the budget the readings before descent may take: a reading that would take more is
-left out, so that descent keeps at least the rest (a busy machine slows both alike)."""
+"""Most of the budget the readings before descent may take: a reading planned to take more is
+left out, and one that runs longer than planned stops at that share with what it has, so that
+descent keeps at least the rest."""
 FIT_PER_READING = 5.0
 """The quick fit of the colours (:func:`~wise.optimize.inversion.fit_quickly`) takes about this
 many times the steps' reading before it (cartoon at 512 pixels: 2.3 s against 0.47 s on a quiet
@@ -184,7 +185,8 @@ def refine(
         # the cartoon's colours fitted to the levels read, on a sample of pixels: descent from a
         # tone curve that fits but is not the example's trades one for another
         if reading_seconds * (1.0 + FIT_PER_READING) <= READING_SHARE * budget:
-            params = fit_quickly(effect, content, target, params, side=INVERSION_SIDE)
+            deadline = began + READING_SHARE * budget
+            params = fit_quickly(effect, content, target, params, side=INVERSION_SIDE, deadline=deadline)
         elif fits_quickly(effect):
             left_out.append("the colour fit")
         read = None if torch.equal(params, start.reshape(params.shape)) else params
