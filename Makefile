@@ -12,9 +12,13 @@ install: $(VENV)/.installed
 # The fused kernels compile for float64 beside float32 (the tests compare them with PyTorch in
 # both); on two or more cores the two compile at once, in the time of one.
 $(VENV)/.installed: pyproject.toml
+	@echo "installing into $(VENV): 1/4 the virtual environment"
 	$(PYTHON) -m venv $(VENV)
+	@echo "installing into $(VENV): 2/4 PyTorch, $(TORCH_SPEC) (about 15 s from pip's cache, minutes to download)"
 	$(BIN)/python -m pip install --quiet "$(TORCH_SPEC)"
+	@echo "installing into $(VENV): 3/4 wise and its dependencies (about 30 s from pip's cache, minutes to download)"
 	$(BIN)/python -m pip install --quiet -e ".[dev]"
+	@echo "installing into $(VENV): 4/4 the fast CPU kernels: checking LLVM, then compiling"
 	$(BIN)/python -m wise.filters.fused.llvm || $(MAKE) --no-print-directory llvm
 	$(BIN)/python -m wise.effects.compile float32 float64
 	touch $@

@@ -172,6 +172,12 @@ def run(
             print(
                 f"interrupted after {len(outcome.losses)} iterations; writing the state reached", file=out, flush=True
             )
+        height, width = content_full.shape[-2:]
+        print(
+            f"rendering the result at {size_text(width, height)} and writing the report and the animation",
+            file=out,
+            flush=True,
+        )
         scores = _write_results(
             folder, effect, content, target, content_full, outcome, frames, levels, size_hw, settings
         )
@@ -350,6 +356,13 @@ def transfer(
         weights_file(settings.vgg_weights)
     content = read_image(content_path)
     style = read_image(style_path) if style_path is not None else None
+    which = f"built-in style {builtin_style}" if builtin_style is not None else str(style_path)
+    out = options.get("out", sys.stdout)
+    print(
+        f"neural style transfer of {content_path} with {which} ({method}): the target to re-create",
+        file=out,
+        flush=True,
+    )
     if method == "gatys":
         assert style is not None
         size_hw = working_size(*content.shape[-2:], int(options.get("size", 512)))  # type: ignore[call-overload]
