@@ -14,9 +14,9 @@ install: $(VENV)/.installed
 $(VENV)/.installed: pyproject.toml
 	@echo "installing into $(VENV): 1/4 the virtual environment"
 	$(PYTHON) -m venv $(VENV)
-	@echo "installing into $(VENV): 2/4 PyTorch, $(TORCH_SPEC) (about 15 s from pip's cache, minutes to download)"
+	@echo "installing into $(VENV): 2/4 PyTorch, $(TORCH_SPEC) (about a minute from a local wheel, more to download)"
 	$(BIN)/python -m pip install --quiet "$(TORCH_SPEC)"
-	@echo "installing into $(VENV): 3/4 wise and its dependencies (about 30 s from pip's cache, minutes to download)"
+	@echo "installing into $(VENV): 3/4 wise and its dependencies (one to two minutes from local wheels, more to download)"
 	$(BIN)/python -m pip install --quiet -e ".[dev]"
 	@echo "installing into $(VENV): 4/4 the fast CPU kernels: checking LLVM, then compiling"
 	$(BIN)/python -m wise.filters.fused.llvm || $(MAKE) --no-print-directory llvm

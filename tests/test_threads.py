@@ -13,7 +13,8 @@ import pytest
 from wise.errors import WiseError
 from wise.threads import THREADS_VARIABLE, affinity_cores, cgroup_quota, thread_count, usable_cores
 
-COUNT = "import wise, torch; print(torch.get_num_threads())"
+POOL = "import wise, torch; print(torch.get_num_threads())"
+PLANNED = "import os, wise; print(os.environ['OMP_NUM_THREADS'])"
 
 
 def test_a_cgroup_quota_is_read_in_cores(tmp_path: Path) -> None:
@@ -44,16 +45,16 @@ def test_wise_threads_overrides_and_is_checked(monkeypatch: pytest.MonkeyPatch) 
         thread_count()
 
 
-def _threads_of(env: dict[str, str]) -> int:
+def _threads_of(env: dict[str, str], program: str = PLANNED) -> int:
     clean = {k: v for k, v in os.environ.items() if k not in ("OMP_NUM_THREADS", THREADS_VARIABLE)}
-    done = subprocess.run([sys.executable, "-c", COUNT], env={**clean, **env}, capture_output=True, text=True)
+    done = subprocess.run([sys.executable, "-c", program], env={**clean, **env}, capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
     return int(done.stdout)
 
 
 def test_importing_wise_first_sizes_pytorch_to_the_usable_cores() -> None:
     assert _threads_of({}) == usable_cores()
-    assert _threads_of({THREADS_VARIABLE: "1"}) == 1
+    assert _threads_of({THREADS_VARIABLE: "1"}, POOL) == 1  # PyTorch's pool takes the count
     assert _threads_of({"OMP_NUM_THREADS": "1"}) == 1  # the user's OpenMP setting stands
     assert _threads_of({"OMP_NUM_THREADS": "1", THREADS_VARIABLE: "2"}) == 2  # unless wise's is given
 
