@@ -23,7 +23,8 @@ from skimage import data
 import wise
 from wise import metrics
 from wise.io import image_to_tensor, tensor_to_image
-from wise.optimize.refine import DEFAULT_BUDGET, answers, refine
+from wise.optimize.refine import answers, refine
+from wise.optimize.settings import DEFAULT_BUDGET
 from wise.ppn.predictor import Predictor, at_short_side
 
 RENDER_SHORT_SIDE = 512
