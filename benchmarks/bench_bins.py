@@ -21,6 +21,9 @@ count read (the other parameters true) against the example: how much a wrong cou
 
 from __future__ import annotations
 
+import wise  # noqa: F401  (before torch, as the command line: OpenMP waits without spinning)
+
+# isort: split
 import argparse
 import json
 import time

@@ -11,6 +11,9 @@ the tests compare with (``wise.filters.gaussian._correlate_axis``).
 
 from __future__ import annotations
 
+import wise  # noqa: F401  (before torch, as the command line: OpenMP waits without spinning)
+
+# isort: split
 import argparse
 import time
 

@@ -13,6 +13,9 @@ uses the threads :mod:`wise.threads` gives it (``WISE_THREADS`` overrides).
 
 from __future__ import annotations
 
+import wise  # noqa: F401  (before torch, as the command line: OpenMP waits without spinning)
+
+# isort: split
 import argparse
 import contextlib
 import multiprocessing

@@ -16,6 +16,9 @@ the total time as a markdown table.
 
 from __future__ import annotations
 
+import wise  # noqa: F401  (before torch, as the command line: OpenMP waits without spinning)
+
+# isort: split
 import argparse
 import math
 import random

@@ -19,6 +19,9 @@ run makes them once, in its first minutes.
 
 from __future__ import annotations
 
+import wise  # noqa: F401  (before torch, as the command line: OpenMP waits without spinning)
+
+# isort: split
 import argparse
 import inspect
 import time

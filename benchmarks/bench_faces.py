@@ -21,6 +21,9 @@ x 250–580, y 300–650). Three measures on the face box, on CIE L*:
 
 from __future__ import annotations
 
+import wise  # before torch, as the command line: OpenMP waits without spinning
+
+# isort: split
 import argparse
 import json
 import time
@@ -31,7 +34,6 @@ import torch
 from PIL import Image
 from skimage import data
 
-import wise
 from wise.io import image_to_tensor, read_image, tensor_to_image
 from wise.metrics import face_measures
 from wise.render import render

@@ -12,6 +12,9 @@ and prints each one's best time and the ratio. Both kinds of kernels are compile
 
 from __future__ import annotations
 
+import wise  # noqa: F401  (before torch, as the command line: OpenMP waits without spinning)
+
+# isort: split
 import argparse
 import time
 

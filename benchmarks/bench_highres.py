@@ -11,6 +11,9 @@ fresh process and reports its wall time and peak RSS.
 
 from __future__ import annotations
 
+import wise  # before torch, as the command line: OpenMP waits without spinning
+
+# isort: split
 import argparse
 import os
 import subprocess
@@ -22,7 +25,6 @@ from pathlib import Path
 import torch
 import torch.nn.functional as F
 
-import wise
 from wise.io import read_image, write_image
 from wise.paramfile import save_params
 

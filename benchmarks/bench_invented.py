@@ -13,6 +13,9 @@ reference has nowhere near, as opposed to colours the effect could not reach.
 
 from __future__ import annotations
 
+import wise  # noqa: F401  (before torch, as the command line: OpenMP waits without spinning)
+
+# isort: split
 import argparse
 from pathlib import Path
 

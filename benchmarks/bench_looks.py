@@ -20,6 +20,9 @@ portrait's height and width (the NPRportrait photo of ``shared/data/portrait.png
 
 from __future__ import annotations
 
+import wise  # before torch, as the command line: OpenMP waits without spinning
+
+# isort: split
 import argparse
 import json
 from pathlib import Path
@@ -29,7 +32,6 @@ import torch.nn.functional as F
 from PIL import Image
 from skimage import data
 
-import wise
 from wise.filters import gaussian_blur
 from wise.io import image_to_tensor, read_image, tensor_to_image
 from wise.metrics import orientation_agreement

@@ -14,6 +14,9 @@ the ink (share of pixels darker than 0.5) of the small render over that of the r
 
 from __future__ import annotations
 
+import wise  # before torch, as the command line: OpenMP waits without spinning
+
+# isort: split
 import argparse
 import json
 from pathlib import Path
@@ -22,7 +25,6 @@ import numpy as np
 import torch
 from skimage.metrics import structural_similarity
 
-import wise
 from wise.filters._checks import REFERENCE_SHORT_SIDE
 from wise.io import read_image, tensor_to_image
 from wise.render import reduced, render

@@ -13,6 +13,9 @@ down towards a smaller truth.
 
 from __future__ import annotations
 
+import wise  # noqa: F401  (before torch, as the command line: OpenMP waits without spinning)
+
+# isort: split
 import argparse
 
 import torch

@@ -13,6 +13,9 @@ once and reuses it in later epochs:
 
 from __future__ import annotations
 
+import wise  # noqa: F401  (before torch, as the command line: OpenMP waits without spinning)
+
+# isort: split
 import argparse
 import time
 

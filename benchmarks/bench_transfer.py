@@ -20,6 +20,9 @@ is compared with the working-size result: the masks carry over when the two agre
 
 from __future__ import annotations
 
+import wise  # before torch, as the command line: OpenMP waits without spinning
+
+# isort: split
 import argparse
 import io
 import json
@@ -30,7 +33,6 @@ from pathlib import Path
 
 import torch.nn.functional as F
 
-import wise
 from wise import metrics
 from wise.io import read_image, write_image
 from wise.nst import stylize

@@ -13,6 +13,9 @@ and may differ; ``tests/effects/reference_xdog.py`` holds the same values).
 
 from __future__ import annotations
 
+import wise  # before torch, as the command line: OpenMP waits without spinning
+
+# isort: split
 import argparse
 from pathlib import Path
 
@@ -21,7 +24,6 @@ import torch
 from PIL import Image
 from skimage.metrics import structural_similarity
 
-import wise
 from wise.io import read_image
 
 REFERENCE_PRESETS = {

@@ -13,6 +13,9 @@ On the trials of ``wise bench ppn`` (the same seeded references), for each param
 
 from __future__ import annotations
 
+import wise  # noqa: F401  (before torch, as the command line: OpenMP waits without spinning)
+
+# isort: split
 import argparse
 import json
 from pathlib import Path

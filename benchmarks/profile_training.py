@@ -25,6 +25,9 @@ bodies (Python), and the rest.
 
 from __future__ import annotations
 
+import wise  # noqa: F401  (before torch, as the command line: OpenMP waits without spinning)
+
+# isort: split
 import argparse
 import resource
 import time

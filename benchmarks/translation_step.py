@@ -5,6 +5,9 @@ real and fake. Usage: ``python benchmarks/translation_step.py [--size 256] [--ba
 
 from __future__ import annotations
 
+import wise  # noqa: F401  (before torch, as the command line: OpenMP waits without spinning)
+
+# isort: split
 import argparse
 import time
 

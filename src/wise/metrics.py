@@ -64,6 +64,40 @@ def far_colour_share(image: torch.Tensor, reference: torch.Tensor, far: float = 
     return float(((lab(image) - lab(reference)).norm(dim=1) > far).float().mean())
 
 
+MARK_SIGMA = 2.0
+"""Sigma (pixels) of the blur whose difference from the lightness is a picture's thin structure."""
+MARK_CONTRAST = 8.0
+"""CIE L* by which a thin structure must be darker or lighter than the reference's to count as a mark."""
+
+
+def marks(image: torch.Tensor, reference: torch.Tensor) -> tuple[float, float]:
+    """Shares of pixels on thin structures of ``image`` that the ``reference`` does not have
+    (dashes, scratches, streaks): darker, lighter. Both ``(1, 3, H, W)`` in [0, 1].
+
+    A picture's thin structure is its CIE lightness minus that lightness blurred by
+    :data:`MARK_SIGMA` pixels. A pixel is a mark where ``image``'s structure is more than
+    :data:`MARK_CONTRAST` L* darker (or lighter) than its surroundings, than the reference's
+    structure there and than the reference's pixel: a dark line where the reference has none or a
+    fainter one. Lines the
+    reference has count as well matched; lines it has and ``image`` lacks are no marks."""
+    if image.shape != reference.shape:
+        raise ValueError(f"image {tuple(image.shape)} and reference {tuple(reference.shape)} differ in size")
+
+    def lightness(picture: torch.Tensor) -> torch.Tensor:
+        return rgb_to_lab(picture.clamp(0.0, 1.0))[:, :1]
+
+    def structure(lightness: torch.Tensor) -> torch.Tensor:
+        return lightness - gaussian_blur(lightness, MARK_SIGMA, scale=1.0)
+
+    own, theirs = lightness(image), lightness(reference)
+    own_structure = structure(own)
+    unmatched = own_structure - structure(theirs)
+    difference = own - theirs  # the pixels beside a dark line are lighter than its blur, not than the reference
+    darker = (own_structure < -MARK_CONTRAST) & (unmatched < -MARK_CONTRAST) & (difference < -MARK_CONTRAST)
+    lighter = (own_structure > MARK_CONTRAST) & (unmatched > MARK_CONTRAST) & (difference > MARK_CONTRAST)
+    return float(darker.float().mean()), float(lighter.float().mean())
+
+
 def stroke_orientation(image: torch.Tensor, sigma: float = 4.0) -> torch.Tensor:
     """The dominant orientation of the strokes of an image as a doubled-angle field.
 

@@ -7,6 +7,7 @@ import torch.nn.functional as F
 
 import wise
 import wise.optimize.parametric as parametric
+from wise import metrics
 from wise.errors import WiseError
 from wise.filters.smoothing import step_temperature
 from wise.optimize import Settings, optimize
@@ -319,3 +320,42 @@ def test_soft_gradients_default_to_per_pixel_descent() -> None:
     assert Settings(mode="global").soft_gradients == 0.0
     with pytest.raises(WiseError, match="gradient softness"):
         Settings(soft_gradients=1.5)
+
+
+@pytest.mark.parametrize("size", [(512, 512), (300, 700), (200, 256)])
+def test_the_crops_of_masks_cover_every_pixel_each_pass_in_windows_of_one_size(size: tuple[int, int]) -> None:
+    generator = torch.Generator().manual_seed(1)
+    for passes in range(2):
+        covered = torch.zeros(size, dtype=torch.int32)
+        crop = min(256, *size)  # as optimize_masks_on_crops takes it
+        windows = parametric._covering_windows(size, crop, 24, passes, generator)
+        for (top, y0, y1), (left, x0, x1) in windows:
+            assert y1 - y0 == min(size[0], crop + 48) and x1 - x0 == min(size[1], crop + 48)
+            assert y0 <= top and top + crop <= y1 and x0 <= left and left + crop <= x1
+            covered[top : top + crop, left : left + crop] += 1
+        assert int(covered.min()) >= 1
+
+
+def test_masks_fitted_at_the_size_of_the_result_leave_no_lines_the_target_lacks(astronaut: torch.Tensor) -> None:
+    # at a working size of half the result's, the watercolor's pencil contours fall under a pixel:
+    # masks fitted there keep the contours' start opacity, and the result shows lines where the
+    # target has none (a target rendered without contours)
+    effect = wise.effects.create("watercolor")
+    full = F.interpolate(astronaut, size=(256, 256), mode="area")
+    working = F.interpolate(full, size=(128, 128), mode="area")
+    start = effect.params_from_dict({"contour": 0.6})
+    with torch.no_grad():
+        target = effect(full, effect.params_from_dict({"contour": 0.0})[None])
+    settings = Settings(mode="local", iterations=30, lr=0.1, loss="l1-lab", levels=1)
+    reduced_target = F.interpolate(target, size=(128, 128), mode="area")
+    at_working_size = optimize(effect, working, reduced_target, start, settings)
+    start_masks = start[None, :, None, None].expand(1, -1, 128, 128)
+    on_crops = parametric.optimize_masks_on_crops(effect, full, target, start_masks, settings, crop=128)
+    assert on_crops.params.shape == at_working_size.params.shape and on_crops.result.shape == working.shape
+
+    def marks_at_full_size(params: torch.Tensor) -> float:
+        with torch.no_grad():
+            return metrics.marks(effect(full, F.interpolate(params, size=(256, 256), mode="bilinear")), target)[0]
+
+    before, after = marks_at_full_size(at_working_size.params), marks_at_full_size(on_crops.params)
+    assert before > 0.02 and after < 0.6 * before

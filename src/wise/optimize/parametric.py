@@ -28,7 +28,7 @@ from wise.filters.gaussian import gaussian_blur
 from wise.filters.smoothing import annealed_temperature, smoothed_steps, softened_gradients
 from wise.optimize.adam import Adam
 from wise.optimize.settings import PYRAMIDS, Settings
-from wise.params import NORMALIZED_MAX, NORMALIZED_MIN, check_params, clamp_masks
+from wise.params import NORMALIZED_MAX, NORMALIZED_MIN, check_params, clamp_masks, resize_masks
 from wise.vgg import StyleLoss, load_vgg19
 
 LAB_WEIGHT = 0.5
@@ -279,11 +279,14 @@ def optimize_coarse_to_fine(
     levels: tuple[tuple[int, Settings], ...],
     on_step: Callable[[int, float, torch.Tensor], None] | None = None,
     between_levels: Callable[[torch.Tensor], torch.Tensor] | None = None,
+    finest: tuple[torch.Tensor, torch.Tensor] | None = None,
 ) -> Outcome:
     """:func:`optimize` on an image pyramid: each ``(reduction, settings)`` level works on the
     images reduced by that factor and starts from the previous level's parameters
     (``between_levels`` may change global ones before the next level starts, e.g.
-    :func:`wise.optimize.inversion.invert_steps` once descent has moved the rest).
+    :func:`wise.optimize.inversion.invert_steps` once descent has moved the rest). With
+    ``finest`` (content and target at the size the result is rendered at), the last level of
+    parameter masks fits them on crops of those instead (:func:`optimize_masks_on_crops`).
 
     The effects are resolution-independent, so the parameters found on a small copy carry
     over; most iterations then cost a fraction of a full-resolution one. The last level
@@ -306,7 +309,12 @@ def optimize_coarse_to_fine(
             level_content, level_target = content, target
         done = len(losses)
         level_step = None if on_step is None else lambda i, loss, output: on_step(done + i, loss, output)
-        outcome = optimize(effect, level_content, level_target, params, settings, level_step)
+        if finest is not None and index == len(levels) - 1 and mode == "local":
+            canvas = None if outcome is None else outcome.result
+            masks = initial_params(effect, params, "local", tuple(level_content.shape[-2:]))
+            outcome = optimize_masks_on_crops(effect, *finest, masks, settings, on_step=level_step, canvas=canvas)
+        else:
+            outcome = optimize(effect, level_content, level_target, params, settings, level_step)
         params, seconds = outcome.params, seconds + outcome.seconds
         losses.extend(outcome.losses)
         if outcome.interrupted:
@@ -318,6 +326,28 @@ def optimize_coarse_to_fine(
             outcome.result = effect(content, outcome.params)
     outcome.losses, outcome.seconds = losses, seconds
     return outcome
+
+
+def _covering_windows(
+    size: tuple[int, int], crop: int, context: int, passes: int, generator: torch.Generator
+) -> list[tuple[tuple[int, int, int], tuple[int, int, int]]]:
+    """Crops that cover a picture of ``size`` in one pass, in random order: per side, the first
+    pixel of each crop and the rendered span around it (``context`` each side, shifted inward at
+    the picture's edges). Every crop and span has the same size, so the kernels compile once. The
+    crops are spread evenly, one more per side on odd ``passes`` so that their borders move;
+    each pixel is fitted at least once per pass (random crops would reach the outermost pixels
+    once in ``length - crop`` draws)."""
+
+    def spans(length: int) -> list[tuple[int, int, int]]:
+        count = math.ceil(length / crop) + passes % 2
+        starts = sorted({round(index * (length - crop) / max(1, count - 1)) for index in range(count)})
+        span = min(length, crop + 2 * context)
+        firsts = [min(max(start - context, 0), length - span) for start in starts]
+        return [(start, first, first + span) for start, first in zip(starts, firsts)]
+
+    windows = [(rows, columns) for rows in spans(size[0]) for columns in spans(size[1])]
+    order = torch.randperm(len(windows), generator=generator).tolist()
+    return [windows[index] for index in order]
 
 
 def _random_box(size: tuple[int, int], crop: int, generator: torch.Generator) -> tuple[int, int]:
@@ -396,3 +426,108 @@ def optimize_on_crops(
         outcome.seconds = time.perf_counter() - start
         return outcome
     return _finished(outcome, effect, content, start)
+
+
+MASK_CROP_SIZE = 256
+"""Side of the crops of :func:`optimize_masks_on_crops` (pixels of the reference-size picture)."""
+
+
+def optimize_masks_on_crops(
+    effect: Effect,
+    content: torch.Tensor,
+    target: torch.Tensor,
+    init: torch.Tensor,
+    settings: Settings,
+    generator: torch.Generator | None = None,
+    crop: int = MASK_CROP_SIZE,
+    context: int = CROP_CONTEXT,
+    on_step: Callable[[int, float, torch.Tensor], None] | None = None,
+    canvas: torch.Tensor | None = None,
+) -> Outcome:
+    """Parameter masks at their own (working) size fitted to renders of ``content`` at its size,
+    one crop per iteration, the crops covering the picture once per pass (:func:`_covering_windows`).
+
+    A render at a working size below the reference (512 pixels) draws every structure of the
+    effect at the reduced scale, where the finest ones (the pencil contours of the watercolor,
+    XDoG's thinnest lines) fall under a pixel and vanish; the result, rendered at the reference
+    size, shows them wherever their masks were left at their start: dashes the target does not
+    have. Here each iteration resizes the masks to ``content``'s size as the final render does
+    (:func:`wise.params.resize_masks`), renders a ``crop`` x ``crop`` region with ``context``
+    pixels around it at the scale and position of the whole picture, and takes an Adam step on
+    :func:`image_distance` over the region. The learning rate, the masks' clamping and the
+    gradient settings act as in :func:`optimize`, the time limit as in :func:`optimize_on_crops`.
+    ``outcome.result`` is the whole render reduced to the masks' size. ``on_step`` sees each
+    iteration's crop reduced to the masks' size and pasted into ``canvas`` (an image at the masks'
+    size, e.g. the previous level's output, or the content).
+
+    Args:
+        content, target: ``(1, 3, H, W)`` in [0, 1], the size of the render to fit.
+        init: normalized masks ``(1, P, h, w)`` (or global values, spread over ``h, w`` = H, W).
+    """
+    if settings.loss == "nst":
+        raise WiseError("optimization on crops takes the l1, l1-lab or l2 loss, not 'nst'")
+    if content.shape != target.shape:
+        raise WiseError(f"content {tuple(content.shape)} and target {tuple(target.shape)} differ in size")
+    height, width = content.shape[-2:]
+    crop = min(crop, height, width)
+    mask_size = tuple(init.shape[-2:]) if init.dim() == 4 else (height, width)
+    scale = min(height, width) / REFERENCE_SHORT_SIDE
+    generator = generator if generator is not None else torch.Generator().manual_seed(0)
+    params = initial_params(effect, init.to(content), "local", mask_size).requires_grad_()
+    optimizer = Adam([params], lr=settings.lr)
+    outcome = Outcome(params=params.detach())
+    canvas = content if canvas is None else canvas
+    canvas = torch.nn.functional.interpolate(canvas.detach(), size=mask_size, mode="area")
+    shrink = mask_size[0] / height, mask_size[1] / width
+    windows: list[tuple[tuple[int, int, int], tuple[int, int, int]]] = []
+    passes = 0
+    start = time.perf_counter()
+    iterations: deque[float] = deque(maxlen=RECENT_ITERATIONS)
+    renders: deque[float] = deque(maxlen=RECENT_ITERATIONS)
+    try:
+        for iteration in range(1, settings.iterations + 1):
+            began = time.perf_counter()
+            if not windows:
+                windows = _covering_windows((height, width), crop, context, passes, generator)
+                passes += 1
+            (top, y0, y1), (left, x0, x1) = windows.pop()
+            bottom, right = top + crop, left + crop
+            optimizer.zero_grad(set_to_none=True)
+            temperature = annealed_temperature(settings.anneal, _progress(settings, iteration, start))
+            masks = resize_masks(params, (height, width))[..., y0:y1, x0:x1]
+            with inward_gradients(), smoothed_steps(temperature), softened_gradients(settings.soft_gradients):
+                output = effect(content[..., y0:y1, x0:x1], masks, scale=scale, origin=(y0, x0))
+            rendered = time.perf_counter() - began
+            renders.append(rendered * height * width / ((y1 - y0) * (x1 - x0)))
+            region = output[..., top - y0 : bottom - y0, left - x0 : right - x0]
+            loss = image_distance(settings.loss, region, target[..., top:bottom, left:right])
+            loss.backward()
+            _hold(params, effect, settings.held)
+            optimizer.step()
+            with torch.no_grad():
+                clamp_masks(params, effect.param_specs)
+            _schedule_learning_rate(optimizer, settings, iteration, start)
+            value = float(loss.detach())
+            outcome.losses.append(value)
+            outcome.params = params.detach().clone()
+            if on_step is not None:
+                box = top * shrink[0], left * shrink[1], (bottom - top) * shrink[0], (right - left) * shrink[1]
+                _paste(canvas, region.detach(), *box)
+                on_step(iteration, value, canvas)
+            iterations.append(time.perf_counter() - began)
+            if settings.time_limit is not None and _next_would_overrun(settings.time_limit, start, iterations, renders):
+                break
+    except KeyboardInterrupt:
+        outcome.interrupted = True
+    outcome.seconds = time.perf_counter() - start
+    with torch.no_grad():
+        whole = effect(content, resize_masks(outcome.params, (height, width)))
+        outcome.result = torch.nn.functional.interpolate(whole, size=mask_size, mode="area")
+    return outcome
+
+
+def _paste(canvas: torch.Tensor, image: torch.Tensor, top: float, left: float, height: float, width: float) -> None:
+    """``image`` reduced to ``height`` x ``width`` pixels of ``canvas`` and put there at ``top``, ``left``."""
+    y0, x0 = round(top), round(left)
+    y1, x1 = min(canvas.shape[-2], y0 + max(1, round(height))), min(canvas.shape[-1], x0 + max(1, round(width)))
+    canvas[..., y0:y1, x0:x1] = torch.nn.functional.interpolate(image, size=(y1 - y0, x1 - x0), mode="area")

@@ -16,6 +16,7 @@ import torch.nn.functional as F
 from wise import effects, metrics
 from wise.effects.base import Effect
 from wise.errors import WiseError, size_text
+from wise.filters._checks import REFERENCE_SHORT_SIDE
 from wise.interrupt import ctrl_c
 from wise.io import atomic_path, read_image, tensor_to_image, write_image
 from wise.nst import check_builtin_style, stylize, stylize_gatys
@@ -26,7 +27,15 @@ from wise.optimize.inversion import (
     read_starts,
     undoable_starts,
 )
-from wise.optimize.parametric import Outcome, Settings, closest, describe_levels, optimize_coarse_to_fine, pyramid
+from wise.optimize.parametric import (
+    MASK_CROP_SIZE,
+    Outcome,
+    Settings,
+    closest,
+    describe_levels,
+    optimize_coarse_to_fine,
+    pyramid,
+)
 from wise.optimize.report import write_animation, write_report
 from wise.optimize.settings import NST_METHODS, init_is_file
 from wise.paramfile import load_params, save_params
@@ -163,8 +172,9 @@ def run(
         starts, between, held = _read_steps(effect, content, target, start_params.to(device), settings.mode, out)
         levels = tuple((reduction, replace(level, held=held)) for reduction, level in levels)
         start_params = _first_level_decides(effect, content, target, starts, levels[0], out)
+        finest = _finest_level(content_full, target_full, size_hw, settings, device, out)
         progress.start()
-        outcome = optimize_coarse_to_fine(effect, content, target, start_params, levels, on_step, between)
+        outcome = optimize_coarse_to_fine(effect, content, target, start_params, levels, on_step, between, finest)
         if settings.mode == "global" and not outcome.interrupted:
             outcome = _kept_start(effect, content, target, start_params, outcome, settings.loss, out)
         interruption.hold()
@@ -179,15 +189,51 @@ def run(
             flush=True,
         )
         scores = _write_results(
-            folder, effect, content, target, content_full, outcome, frames, levels, size_hw, settings
+            folder, effect, content, target, content_full, target_full, outcome, frames, levels, size_hw, settings
         )
     outcome.interrupted = outcome.interrupted or interruption.received
     print(
         f"l1 {scores['l1']:.4f}  psnr {scores['psnr']:.2f} dB  ssim {scores['ssim']:.4f}  "
+        f"marks {100 * scores['marks_darker']:.2f} % darker, {100 * scores['marks_lighter']:.2f} % lighter  "
         f"in {outcome.seconds:.1f} s; report: {folder / 'report.html'}",
         file=out,
     )
     return outcome
+
+
+def _finest_level(
+    content_full: torch.Tensor,
+    target_full: torch.Tensor,
+    size_hw: tuple[int, int],
+    settings: Settings,
+    device: torch.device | str,
+    out: TextIO,
+) -> tuple[torch.Tensor, torch.Tensor] | None:
+    """Content and target at the reference size (short side 512 pixels) where parameter masks are
+    fitted at a working size below it and the result is rendered at it or above: the last level
+    then fits them on crops rendered there (:func:`wise.optimize.parametric.optimize_masks_on_crops`),
+    where the effect draws the finest structures the result shows and a reduced render loses.
+    None for a working size of the reference size or more, for a content below it (its result is
+    the reference render reduced, where such structures fade as well), for global values and for
+    the ``nst`` loss."""
+    height, width = content_full.shape[-2:]
+    below_the_result = min(size_hw) < REFERENCE_SHORT_SIDE <= min(height, width)
+    if settings.mode != "local" or settings.loss == "nst" or not below_the_result:
+        return None
+    factor = REFERENCE_SHORT_SIDE / min(height, width)
+    size = (round(height * factor), round(width * factor))
+
+    def resized(image: torch.Tensor) -> torch.Tensor:
+        mode = "area" if image.shape[-2] > size[0] else "bilinear"
+        return F.interpolate(image, size=size, mode=mode, align_corners=None).clamp(0.0, 1.0).to(device)
+
+    print(
+        f"the last level fits the masks on {MASK_CROP_SIZE}-pixel crops at {size_text(size[1], size[0])}, "
+        "the size at which the effect draws its finest structures",
+        file=out,
+        flush=True,
+    )
+    return resized(content_full), resized(target_full)
 
 
 def _read_steps(
@@ -288,13 +334,16 @@ def _write_results(
     content: torch.Tensor,
     target: torch.Tensor,
     content_full: torch.Tensor,
+    target_full: torch.Tensor,
     outcome: Outcome,
     frames: list,
     levels: tuple,
     size_hw: tuple[int, int],
     settings: Settings,
 ) -> dict:
-    """Every file of :data:`RESULT_FILES`, the resumable parameter file first; returns the scores."""
+    """Every file of :data:`RESULT_FILES`, the resumable parameter file first; returns the scores:
+    those of the working size, and the marks of the result at full size (:func:`wise.metrics.marks`:
+    thin structures the target does not have)."""
     assert outcome.result is not None
     scores = {
         "effect": effect.name,
@@ -312,7 +361,11 @@ def _write_results(
     }
     params = outcome.params.cpu()
     save_params(folder / "params.safetensors", effect, params)
-    write_image(render(effect.cpu(), content_full, params), folder / "result.png")
+    result_full = render(effect.cpu(), content_full, params)
+    write_image(result_full, folder / "result.png")
+    reference = F.interpolate(target_full, size=result_full.shape[-2:], mode="bilinear", align_corners=False)
+    darker, lighter = metrics.marks(result_full, reference.clamp(0.0, 1.0))
+    scores["marks_darker"], scores["marks_lighter"] = darker, lighter
     with atomic_path(folder / "metrics.json") as path:
         Path(path).write_text(json.dumps(scores, indent=2) + "\n")
     write_report(
