@@ -44,6 +44,13 @@ CROP_SIZE = 128
 CROP_CONTEXT = 24
 """Pixels rendered around a crop so that its filters see their neighbourhood; the loss
 ignores them."""
+MASK_CROP_SIZE = 256
+"""Side of the crops of :func:`optimize_masks_on_crops` (pixels of the reference-size picture)."""
+MASK_CROP_RATE = 2.0
+"""Factor on the learning rate of a last level fitted on crops: a mask pixel steps only in the
+iterations whose crop covers it (about a third of them at 512 pixels), and the lines it must
+take away were never seen by the reduced levels before it. On the demo's watercolor the dashes
+left went from 0.48 % of the pixels to 0.07 %; at 5 times the cartoon's masks turned to noise."""
 
 
 @dataclass
@@ -312,7 +319,8 @@ def optimize_coarse_to_fine(
         if finest is not None and index == len(levels) - 1 and mode == "local":
             canvas = None if outcome is None else outcome.result
             masks = initial_params(effect, params, "local", tuple(level_content.shape[-2:]))
-            outcome = optimize_masks_on_crops(effect, *finest, masks, settings, on_step=level_step, canvas=canvas)
+            on_crops = replace(settings, lr=settings.lr * MASK_CROP_RATE)
+            outcome = optimize_masks_on_crops(effect, *finest, masks, on_crops, on_step=level_step, canvas=canvas)
         else:
             outcome = optimize(effect, level_content, level_target, params, settings, level_step)
         params, seconds = outcome.params, seconds + outcome.seconds
@@ -426,10 +434,6 @@ def optimize_on_crops(
         outcome.seconds = time.perf_counter() - start
         return outcome
     return _finished(outcome, effect, content, start)
-
-
-MASK_CROP_SIZE = 256
-"""Side of the crops of :func:`optimize_masks_on_crops` (pixels of the reference-size picture)."""
 
 
 def optimize_masks_on_crops(
