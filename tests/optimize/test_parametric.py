@@ -70,9 +70,16 @@ def test_masks_bring_a_region_saturated_to_white_back(content: torch.Tensor, mon
 
 
 def test_global_parameters_keep_the_plain_clamp(content: torch.Tensor, monkeypatch: pytest.MonkeyPatch) -> None:
-    result, _, losses = _saturated_start_run(content, "global")
-    _plain_clamp(monkeypatch)
-    plain, _, plain_losses = _saturated_start_run(content, "global")
+    # on one thread: the kernels' sums over several threads round differently from run to run, and
+    # the cartoon's steps turn such differences into other runs
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        result, _, losses = _saturated_start_run(content, "global")
+        _plain_clamp(monkeypatch)
+        plain, _, plain_losses = _saturated_start_run(content, "global")
+    finally:
+        torch.set_num_threads(threads)
     assert losses == plain_losses and torch.equal(result, plain)
 
 
@@ -194,6 +201,8 @@ def test_crops_end_within_their_time_limit_and_can_skip_the_whole_render(astrona
     effect = wise.effects.create("xdog")
     content = F.interpolate(astronaut, size=(192, 256), mode="area")
     settings = Settings(mode="global", iterations=10_000, lr=0.05, loss="l2", time_limit=1.0, anneal=0.3)
+    warm_up = replace(settings, iterations=1, time_limit=None)  # the kernels' first use in this process
+    optimize_on_crops(effect, content, content, effect.default_params(), warm_up, crop=48, render=False)
     outcome = optimize_on_crops(effect, content, content, effect.default_params(), settings, crop=48, render=False)
     assert 5 < len(outcome.losses) < 10_000 and outcome.result is None
     assert outcome.seconds < 1.0 + 0.3
