@@ -365,6 +365,14 @@ def _random_box(size: tuple[int, int], crop: int, generator: torch.Generator) ->
     return top, left
 
 
+def _check_crops(settings: Settings, content: torch.Tensor, target: torch.Tensor) -> None:
+    """Refuses what optimization on crops cannot do: the ``nst`` loss, a target of another size."""
+    if settings.loss == "nst":
+        raise WiseError("optimization on crops takes the l1, l1-lab or l2 loss, not 'nst'")
+    if content.shape != target.shape:
+        raise WiseError(f"content {tuple(content.shape)} and target {tuple(target.shape)} differ in size")
+
+
 def optimize_on_crops(
     effect: Effect,
     content: torch.Tensor,
@@ -389,10 +397,7 @@ def optimize_on_crops(
     """
     if settings.mode != "global":
         raise WiseError("optimization on crops fits global parameters only; use mode 'global'")
-    if settings.loss == "nst":
-        raise WiseError("optimization on crops takes the l1, l1-lab or l2 loss, not 'nst'")
-    if content.shape != target.shape:
-        raise WiseError(f"content {tuple(content.shape)} and target {tuple(target.shape)} differ in size")
+    _check_crops(settings, content, target)
     height, width = content.shape[-2:]
     crop = min(crop, height, width)
     scale = min(height, width) / REFERENCE_SHORT_SIDE
@@ -468,10 +473,7 @@ def optimize_masks_on_crops(
         content, target: ``(1, 3, H, W)`` in [0, 1], the size of the render to fit.
         init: normalized masks ``(1, P, h, w)`` (or global values, spread over ``h, w`` = H, W).
     """
-    if settings.loss == "nst":
-        raise WiseError("optimization on crops takes the l1, l1-lab or l2 loss, not 'nst'")
-    if content.shape != target.shape:
-        raise WiseError(f"content {tuple(content.shape)} and target {tuple(target.shape)} differ in size")
+    _check_crops(settings, content, target)
     height, width = content.shape[-2:]
     crop = min(crop, height, width)
     mask_size = tuple(init.shape[-2:]) if init.dim() == 4 else (height, width)
