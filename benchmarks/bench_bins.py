@@ -33,10 +33,10 @@ import torch
 
 from wise import effects
 from wise.effects.base import Effect
-from wise.io import read_image
+from wise.io import images_in, read_image
 from wise.metrics import psnr
 from wise.optimize.inversion import read_steps
-from wise.optimize.trials import content_at, photos_in
+from wise.optimize.trials import content_at
 from wise.train.procedural import dead_leaves
 
 TOLERANCE = 0.25
@@ -72,7 +72,7 @@ def main() -> None:
     args = parser.parse_args()
 
     effect = effects.create("cartoon").eval()
-    photos = photos_in(args.photos)
+    photos = images_in(args.photos)
     generator = torch.Generator().manual_seed(args.seed)
     index = effect.param_names.index("bins")
     spec = effect.spec("bins")

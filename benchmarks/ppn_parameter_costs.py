@@ -23,8 +23,8 @@ from pathlib import Path
 import torch
 
 from wise import effects, metrics
-from wise.io import read_image
-from wise.optimize.trials import content_at, photos_in, random_reference
+from wise.io import images_in, read_image
+from wise.optimize.trials import content_at, random_reference
 from wise.ppn.predictor import Predictor
 
 
@@ -41,7 +41,7 @@ def main() -> None:
 
     effect = effects.create(args.effect)
     predictor = Predictor(args.model, args.effect)
-    photos = photos_in(args.images)
+    photos = images_in(args.images)
     generator = torch.Generator().manual_seed(args.seed)
     names = effect.param_names
     gains, losses, networks, rows = torch.zeros(len(names)), torch.zeros(len(names)), [], []

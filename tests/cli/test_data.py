@@ -14,6 +14,7 @@ from skimage import data
 
 from wise.cli import main
 from wise.train import adaptive
+from wise.train.tasks import TASKS
 
 IS_ROOT = hasattr(os, "geteuid") and os.geteuid() == 0
 SMALL = ["--min-change", "0", "--count", "4", "--size", "32"]
@@ -152,4 +153,4 @@ def test_unwritable_output_is_refused(photos: Path, tmp_path: Path, capsys: pyte
 def test_help_names_the_tasks(capsys: pytest.CaptureFixture[str]) -> None:
     code, text, _ = run(["data", "adaptive", "--help"], capsys)
     assert code == 0
-    assert all(task in text for task in adaptive.TASKS) and "--test-share" in text
+    assert all(task in text for task in TASKS) and "--test-share" in text

@@ -76,6 +76,50 @@ def _cases(folder: Path) -> dict[str, tuple[list[str], int, str]]:
             "no such file",
         ),  # fmt: skip
         "the editor's start": (["edit", "--preset", "sketch"], 2, "--preset needs --effect"),
+        "train's kind": (["train", "regional"], 2, "invalid choice: 'regional'"),
+        "train's effect": (
+            ["train", "global", "oil", "--images", str(folder), "-o", str(folder / "r")],
+            2,
+            "unknown effect 'oil'",
+        ),
+        "train's architecture": (
+            ["train", "global", "xdog", "--images", str(folder), "--arch", "vgg", "-o", str(folder / "r")],
+            2,
+            "'vgg'",
+        ),
+        "train's pairs": (
+            ["train", "local", "xdog", "--pairs", missing, "-o", str(folder / "r")],
+            2,
+            "not a directory of pairs",
+        ),  # fmt: skip
+        "data's task": (["data", "adaptive", "edges", "--images", str(folder), "-o", str(folder / "p")], 2, "'edges'"),
+        "data's photos": (["data", "drawing", "--images", missing, "-o", str(folder / "p")], 2, "not a directory"),
+        "bench's photos": (
+            ["bench", "recover", "xdog", "--images", missing, "--json", str(folder / "r.json")],
+            2,
+            "not a directory of images",
+        ),  # fmt: skip
+        "bench's start": (
+            ["bench", "recover", "xdog", "--images", str(folder), "--init", "nn", "--json", str(folder / "r.json")],
+            2,
+            "--init 'nn'",
+        ),  # fmt: skip
+        "bench's metrics": (
+            [
+                "bench",
+                "pairs",
+                "--model",
+                "builtin:contours",
+                "--pairs",
+                str(folder),
+                "--json",
+                str(folder / "r.json"),
+                "--inception-weights",
+                str(photo),
+            ],
+            2,
+            "add --fid",
+        ),  # fmt: skip
     }
 
 

@@ -155,3 +155,15 @@ def test_tonenet_learns_from_the_tone_features_too() -> None:
         network.head[0].weight[:, -TONE_FEATURES:] += 0.5  # only the weights that read the tone features
         after = network(photo, photo)
     assert float((after - before).abs().max()) > 1e-3
+
+
+def test_the_light_names_are_the_registries() -> None:
+    """The commands check names against wise.ppn.choices before PyTorch loads; those names must
+    be the networks that load."""
+    from wise.ppn import LOCAL_ARCHITECTURES
+    from wise.ppn.choices import ARCHITECTURE_NAMES, LOCAL_ARCHITECTURE_NAMES, POST_NETWORK_NAMES, POST_WIDTH
+    from wise.ppn.postprocess import DEFAULT_WIDTH, POST_NETWORKS
+
+    assert tuple(ARCHITECTURES) == ARCHITECTURE_NAMES
+    assert tuple(LOCAL_ARCHITECTURES) == LOCAL_ARCHITECTURE_NAMES
+    assert tuple(POST_NETWORKS) == POST_NETWORK_NAMES and DEFAULT_WIDTH == POST_WIDTH

@@ -10,7 +10,8 @@ import wise
 from wise.io import image_to_tensor
 from wise.ppn.modelfile import builtin_model_path
 from wise.ppn.predictor import LocalPredictor, at_short_side
-from wise.train.adaptive import TASKS, preset_value, task_preset
+from wise.train.adaptive import preset_value, task_preset
+from wise.train.tasks import TASKS
 
 SHIPPED = ("contours", "details", "background")
 PHOTOS = {"contours": "coffee", "details": "chelsea", "background": "astronaut"}

@@ -24,8 +24,9 @@ from wise.filters._checks import REFERENCE_SHORT_SIDE
 from wise.io import read_image
 from wise.paramfile import load_params
 from wise.train import adaptive, regions
-from wise.train.adaptive import REACHABLE, TASKS, AdaptiveSettings, pair_counts, write_pairs
+from wise.train.adaptive import REACHABLE, AdaptiveSettings, pair_counts, write_pairs
 from wise.train.pairs import check_pairs, pair_files
+from wise.train.tasks import TASKS
 
 SIDE = 128
 """Side of the synthetic pictures: the rules' windows are a few pixels wide at this size."""

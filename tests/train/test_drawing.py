@@ -13,8 +13,9 @@ from tests.images import astronaut_png
 from wise.errors import WiseError
 from wise.io import read_image
 from wise.train.adaptive import load_photos
+from wise.train.choices import DESCRIPTION_FILE
 from wise.train.drawing import HATCH_INK, OUTLINE_INK, draw, hatch_lines
-from wise.train.drawing_pairs import DESCRIPTION_FILE, DrawingSettings, write_drawing_pairs
+from wise.train.drawing_pairs import DrawingSettings, write_drawing_pairs
 
 
 def _flat(value: float, size: int = 128) -> torch.Tensor:

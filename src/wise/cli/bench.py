@@ -4,31 +4,32 @@
 from __future__ import annotations
 
 import argparse
-from typing import TextIO
+from typing import TYPE_CHECKING, TextIO
 
-from wise import effects
 from wise.cli import args as types
 from wise.cli.outputs import output_file
 from wise.cli.parser import add_device, add_pixel_limit, add_size, command, device, exit_code, top_command
+from wise.effects.catalogue import NO_EFFECT, check_name
 from wise.errors import WiseError
-from wise.fidelity import load_inception, load_lpips
-from wise.optimize.benchmark import INIT_PPN, ITERATIONS, parse_init, recover
-from wise.optimize.settings import DEFAULT_BUDGET
-from wise.optimize.trials import photos_in
-from wise.ppn.modelfile import model_info, resolve_model
-from wise.ppn.translation import NO_EFFECT
-from wise.train.evaluate import PerceptualMetrics, bench_pairs, pairs_task, read_pairs
+from wise.io import images_in
+from wise.optimize.settings import DEFAULT_BUDGET, INIT_PPN, RECOVER_ITERATIONS, parse_init
+
+if TYPE_CHECKING:
+    from wise.train.evaluate import PerceptualMetrics
 
 IMAGE_LOSSES = ("l1", "l2")
 """The losses the crop iterations take."""
 
 
 def run_recover(args: argparse.Namespace, out: TextIO) -> int:
-    effects.create(args.effect)
+    check_name(args.effect)
     init_kind, model = parse_init(args.init)
+    photos = images_in(args.images)
+    from wise.optimize.benchmark import recover  # PyTorch
+    from wise.ppn.modelfile import resolve_model
+
     if init_kind == INIT_PPN:
         resolve_model(model, args.effect, "global")
-    photos = photos_in(args.images)
     inputs = {f"photo {path.name}": path for path in photos}
     output_file(args.json, {**inputs, "--init": model}, (".json",))
     result = recover(
@@ -49,11 +50,12 @@ def run_recover(args: argparse.Namespace, out: TextIO) -> int:
 
 
 def run_ppn(args: argparse.Namespace, out: TextIO) -> int:
-    from wise.optimize.ppn_benchmark import bench_ppn
+    check_name(args.effect)
+    photos = images_in(args.images)
+    from wise.optimize.ppn_benchmark import bench_ppn  # PyTorch
+    from wise.ppn.modelfile import resolve_model
 
-    effects.create(args.effect)
     resolve_model(args.model, args.effect, "global")
-    photos = photos_in(args.images)
     inputs = {f"photo {path.name}": path for path in photos}
     output_file(args.json, {**inputs, "--model": args.model}, (".json",))
     result = bench_ppn(
@@ -68,7 +70,11 @@ def _pairs_effect(args: argparse.Namespace) -> str:
     if args.effect == NO_EFFECT:
         return NO_EFFECT
     if args.effect is not None:
-        return effects.create(args.effect).name
+        check_name(args.effect)
+        return args.effect
+    from wise.ppn.modelfile import model_info  # PyTorch
+    from wise.train.evaluate import pairs_task
+
     if not str(args.model).startswith("builtin:"):
         return model_info(args.model).effect
     task_effect = pairs_task(args.pairs).get("effect")
@@ -77,15 +83,21 @@ def _pairs_effect(args: argparse.Namespace) -> str:
     return str(task_effect)
 
 
-def _perceptual(args: argparse.Namespace) -> PerceptualMetrics | None:
-    """The networks of ``--fid`` and ``--lpips``, loaded from the user's weight files (refused
-    before any work when a file is missing or wrong)."""
+def _check_perceptual(args: argparse.Namespace) -> None:
     if (args.alexnet_weights or args.lpips_weights) and not args.lpips:
         raise WiseError("--alexnet-weights and --lpips-weights are for --lpips; add --lpips")
     if args.inception_weights and not args.fid:
         raise WiseError("--inception-weights is for --fid; add --fid")
+
+
+def _perceptual(args: argparse.Namespace) -> PerceptualMetrics | None:
+    """The networks of ``--fid`` and ``--lpips``, loaded from the user's weight files (refused
+    before any work when a file is missing or wrong)."""
     if not (args.fid or args.lpips):
         return None
+    from wise.fidelity import load_inception, load_lpips
+    from wise.train.evaluate import PerceptualMetrics
+
     return PerceptualMetrics(
         inception=load_inception(args.inception_weights) if args.fid else None,
         lpips=load_lpips(args.alexnet_weights, args.lpips_weights) if args.lpips else None,
@@ -93,7 +105,11 @@ def _perceptual(args: argparse.Namespace) -> PerceptualMetrics | None:
 
 
 def run_pairs(args: argparse.Namespace, out: TextIO) -> int:
+    _check_perceptual(args)
     effect = _pairs_effect(args)
+    from wise.ppn.modelfile import resolve_model  # PyTorch
+    from wise.train.evaluate import bench_pairs, read_pairs
+
     path = resolve_model(args.model, effect, "local")
     pairs, _ = read_pairs(args.pairs)
     inputs = {f"pair {pair.name}": pair.photo for pair in pairs}
@@ -121,9 +137,9 @@ def register(commands: argparse._SubParsersAction) -> None:
     recover_parser.add_argument(
         "--iters",
         type=types.iterations,
-        default=ITERATIONS,
+        default=RECOVER_ITERATIONS,
         metavar="N",
-        help=f"iterations per trial, all levels (default {ITERATIONS})",
+        help=f"iterations per trial, all levels (default {RECOVER_ITERATIONS})",
     )
     recover_parser.add_argument(
         "--lr", type=types.positive_rate, default=0.1, help="learning rate of the coarsest level (default 0.1)"

@@ -14,9 +14,8 @@ from wise.cli import args as types
 from wise.cli.outputs import OutputFolder
 from wise.cli.parser import add_pixel_limit, add_size, command, exit_code, top_command
 from wise.errors import WiseError, WiseWarning
-from wise.train.adaptive import MIN_CHANGE, SPLITS, TASKS, AdaptiveSettings, load_photos, write_pairs
-from wise.train.drawing_pairs import DESCRIPTION_FILE, DrawingSettings, write_drawing_pairs
-from wise.train.local_settings import TASK_FILE
+from wise.train.choices import ADAPTIVE_SPLITS, DESCRIPTION_FILE, MIN_CHANGE, TASK_FILE
+from wise.train.tasks import TASKS
 
 MAX_PAIRS = 1_000_000
 """Most pairs one command makes (a million pairs of 256 pixels take days and terabytes)."""
@@ -33,7 +32,7 @@ def _check_folders(images: Path, output: Path, description: str) -> None:
         raise WiseError(f"{output}: inside the photo folder --images {images}; write the pairs elsewhere")
     if pairs in photos.parents:
         raise WiseError(f"{output}: holds the photo folder --images {images}; write the pairs elsewhere")
-    found = [name for name in (description, *SPLITS) if (output / name).exists()]
+    found = [name for name in (description, *ADAPTIVE_SPLITS) if (output / name).exists()]
     if found:
         raise WiseError(
             f"{output}: holds pairs already ({', '.join(found)}); choose another folder or remove them first"
@@ -41,6 +40,9 @@ def _check_folders(images: Path, output: Path, description: str) -> None:
 
 
 def run_adaptive(args: argparse.Namespace, out: TextIO) -> int:
+    folder = _output_folder(args, TASK_FILE)
+    from wise.train.adaptive import AdaptiveSettings, write_pairs  # PyTorch
+
     settings = AdaptiveSettings(
         task=args.task,
         effect=args.effect,
@@ -52,32 +54,42 @@ def run_adaptive(args: argparse.Namespace, out: TextIO) -> int:
         min_change=args.min_change,
     )
     settings.resolve()
-    folder, photos = _prepare(args, TASK_FILE, settings.size)
+    photos = _photos(args, settings.size)
     with folder.guard():
         summary = write_pairs(args.output, settings, photos, out=out)
     return exit_code(summary["interrupted"])
 
 
 def run_drawing(args: argparse.Namespace, out: TextIO) -> int:
+    folder = _output_folder(args, DESCRIPTION_FILE)
+    from wise.train.drawing_pairs import DrawingSettings, write_drawing_pairs  # PyTorch
+
     settings = DrawingSettings(count=args.count, size=args.size, test_share=args.test_share, seed=args.seed)
     settings.check()
-    folder, photos = _prepare(args, DESCRIPTION_FILE, settings.size)
+    photos = _photos(args, settings.size)
     with folder.guard():
         summary = write_drawing_pairs(args.output, settings, photos, out=out)
     return exit_code(summary["interrupted"])
 
 
-def _prepare(args: argparse.Namespace, description: str, size: int) -> tuple[OutputFolder, list]:
-    """The checked output folder and the readable photos of a pairs command."""
+def _output_folder(args: argparse.Namespace, description: str) -> OutputFolder:
+    """The checked output folder of a pairs command (checked before the heavy imports)."""
     images, output = Path(args.images), Path(args.output)
     if not images.is_dir():
         raise WiseError(f"--images {images}: not a directory of photos")
     folder = OutputFolder(output, (description,), {"--images": args.images})
     _check_folders(images, output, description)
-    photos, skipped = load_photos(images, size)
+    return folder
+
+
+def _photos(args: argparse.Namespace, size: int) -> list:
+    """The readable photos of ``--images`` for pairs of ``size`` pixels; warns of those skipped."""
+    from wise.train.adaptive import load_photos
+
+    photos, skipped = load_photos(Path(args.images), size)
     if skipped:
-        warnings.warn(f"{images}: skipped {len(skipped)} unreadable or too small files", WiseWarning, stacklevel=2)
-    return folder, photos
+        warnings.warn(f"{args.images}: skipped {len(skipped)} unreadable or too small files", WiseWarning, stacklevel=2)
+    return photos
 
 
 def register(commands: argparse._SubParsersAction) -> None:

@@ -11,22 +11,21 @@ import logging
 from pathlib import Path
 from typing import TextIO
 
-import torch
-
-from wise import effects
 from wise.cli import args as types
 from wise.cli.outputs import OutputFolder
 from wise.cli.parser import add_pixel_limit, command, exit_code, top_command
+from wise.effects.catalogue import NO_EFFECT, check_name
 from wise.errors import WiseError
-from wise.ppn import ARCHITECTURES
-from wise.ppn.postprocess import DEFAULT_WIDTH as POST_WIDTH
-from wise.ppn.translation import NO_EFFECT, NO_POST, POST_KINDS, PPN_KINDS
-from wise.train.data import MIXTURE_PRESET_SHARE, PROCEDURAL_SHARE, SAMPLINGS
-from wise.train.discriminator import GAN_LOSSES
-from wise.train.local_settings import DIRECTIONS, LocalSettings, prepare_local
-from wise.train.losses import LOSSES
-from wise.train.schedules import LR_SCHEDULES
-from wise.train.settings import TrainSettings, prepare
+from wise.ppn.choices import ARCHITECTURE_NAMES, NO_POST, POST_KINDS, POST_WIDTH, PPN_KINDS
+from wise.train.choices import (
+    DIRECTIONS,
+    GAN_LOSSES,
+    LOSSES,
+    LR_SCHEDULES,
+    MIXTURE_PRESET_SHARE,
+    PROCEDURAL_SHARE,
+    SAMPLINGS,
+)
 
 ACCELERATORS = ("auto", "cpu", "gpu", "cuda", "mps")
 RUN_FILES = ("model.safetensors", "report.html", "settings.json")
@@ -36,6 +35,10 @@ DEFAULT_WINDOW = 128
 
 
 def _check_accelerator(name: str) -> None:
+    if name not in ("gpu", "cuda", "mps"):
+        return
+    import torch
+
     if name in ("gpu", "cuda") and not torch.cuda.is_available():
         raise WiseError(f"--accelerator {name}: CUDA is not available here; use --accelerator cpu")
     if name == "mps" and not torch.backends.mps.is_available():
@@ -59,7 +62,7 @@ def _engine_settings(args: argparse.Namespace) -> dict:
 
 
 def run_train_global(args: argparse.Namespace, out: TextIO) -> int:
-    effects.create(args.effect)
+    check_name(args.effect)
     _check_accelerator(args.accelerator)
     for option, folder in (("--images", args.images), ("--val-images", args.val_images)):
         if folder is not None and not Path(folder).is_dir():
@@ -73,6 +76,8 @@ def run_train_global(args: argparse.Namespace, out: TextIO) -> int:
         if not args.fixed:
             raise WiseError("--cache keeps a fixed set of examples; pass --fixed too, or leave --cache out")
         OutputFolder(args.cache, (), {})
+    from wise.train.settings import TrainSettings, prepare  # PyTorch
+
     settings = TrainSettings(
         effect=args.effect,
         images=args.images,
@@ -113,11 +118,13 @@ def _quiet_lightning() -> None:
 
 def run_train_local(args: argparse.Namespace, out: TextIO) -> int:
     if args.effect != NO_EFFECT:
-        effects.create(args.effect)
+        check_name(args.effect)
     _check_accelerator(args.accelerator)
     if not Path(args.pairs).is_dir():
         raise WiseError(f"--pairs {args.pairs}: not a directory of pairs (train/ and test/)")
     run_folder = OutputFolder(args.output, RUN_FILES, {})
+    from wise.train.local_settings import LocalSettings, prepare_local  # PyTorch
+
     settings = LocalSettings(
         effect=args.effect,
         pairs=args.pairs,
@@ -315,7 +322,7 @@ def register(commands: argparse._SubParsersAction) -> None:
         "--images", required=True, metavar="DIR", help="folder of training photos (searched recursively)"
     )
     parser.add_argument("-o", "--output", required=True, metavar="RUNDIR", help="folder of the run")
-    parser.add_argument("--arch", choices=tuple(ARCHITECTURES), default="simple", help="network (default simple)")
+    parser.add_argument("--arch", choices=ARCHITECTURE_NAMES, default="simple", help="network (default simple)")
     parser.add_argument("--loss", choices=LOSSES, default="image-l1", help="loss (default image-l1)")
     parser.add_argument(
         "--param-weight",

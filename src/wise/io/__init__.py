@@ -20,7 +20,7 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING
 
-from wise.io.common import IMAGE_SUFFIXES, READ_FORMATS, WRITE_FORMATS, PathLike
+from wise.io.common import IMAGE_SUFFIXES, READ_FORMATS, WRITE_FORMATS, PathLike, images_in
 from wise.io.limits import (
     DEFAULT_MAX_PIXELS,
     MAX_IMAGE_BYTES,
@@ -57,6 +57,7 @@ __all__ = [
     "MAX_PIXELS_ENV",
     "MAX_SAMPLES_PER_PIXEL",
     "IMAGE_SUFFIXES",
+    "images_in",
     "READ_FORMATS",
     "WRITE_FORMATS",
     "PathLike",

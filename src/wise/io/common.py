@@ -4,6 +4,9 @@ error text (no numerical library: the command line checks file names with them b
 from __future__ import annotations
 
 import os
+from pathlib import Path
+
+from wise.errors import WiseError
 
 PathLike = str | os.PathLike[str]
 
@@ -18,3 +21,14 @@ WRITE_FORMATS = {".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG"}
 def one_line(error: BaseException) -> str:
     text = str(error) or type(error).__name__
     return " ".join(text.split())
+
+
+def images_in(folder: PathLike) -> list[Path]:
+    """The images of a folder, sorted by name."""
+    path = Path(folder)
+    if not path.is_dir():
+        raise WiseError(f"{path}: not a directory of images")
+    found = sorted(p for p in path.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+    if not found:
+        raise WiseError(f"{path}: no images ({', '.join(READ_FORMATS.values())}) found")
+    return found

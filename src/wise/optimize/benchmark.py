@@ -34,6 +34,7 @@ from wise.optimize.parametric import (
     pyramid,
 )
 from wise.optimize.search import coordinate_search
+from wise.optimize.settings import INIT_DEFAULTS, INIT_PPN, RECOVER_ITERATIONS, parse_init
 from wise.optimize.trials import PSNR_CAP, Column, mean_of, random_reference, run_trials
 from wise.ppn.predictor import Predictor
 
@@ -42,9 +43,6 @@ LEVELS = ((8, 0.5, 1.0), (4, 0.25, 0.5), (2, 0.15, 0.25), (1, 0.1, 0.25))
 factor on the learning rate). Global parameters carry over between resolutions, so these run
 mostly on small copies (64 px short side at the default 512 px)."""
 COARSE_SHARE = 0.5
-ITERATIONS = 600
-"""Iterations of a trial, all levels and crops (300 left watercolor's fine parameters short of
-the truth: 28.5 dB against 35.2 dB on the same trials)."""
 CROP_LR = 0.3
 """Factor on the learning rate for the iterations on full-resolution crops: a refinement."""
 
@@ -68,20 +66,6 @@ def describe_schedule(levels: tuple[tuple[int, Settings], ...], crops: Settings 
     if crops is not None:
         rows.append({"reduction": 1, "iterations": crops.iterations, "lr": crops.lr, "crop": CROP_SIZE})
     return rows
-
-
-INIT_DEFAULTS = "defaults"
-INIT_PPN = "ppn"
-
-
-def parse_init(init: str) -> tuple[str, str | None]:
-    """``defaults``, ``ppn`` (the built-in model) or ``ppn:MODEL`` -> (kind, model file or None)."""
-    kind, _, model = init.partition(":")
-    if kind == INIT_DEFAULTS and not model:
-        return kind, None
-    if kind == INIT_PPN:
-        return kind, model or None
-    raise WiseError(f"--init {init!r}: use {INIT_DEFAULTS}, {INIT_PPN} or {INIT_PPN}:MODEL")
 
 
 def _trial(
@@ -160,7 +144,7 @@ def recover(
     trials: int = 10,
     size: int = 512,
     seed: int = 0,
-    iterations: int = ITERATIONS,
+    iterations: int = RECOVER_ITERATIONS,
     lr: float = 0.1,
     loss: str = "l2",
     json_path: str | None = None,

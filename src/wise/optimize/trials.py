@@ -19,9 +19,8 @@ import torch
 import torch.nn.functional as F
 
 from wise.effects.base import Effect
-from wise.errors import WiseError
 from wise.interrupt import ctrl_c
-from wise.io import IMAGE_SUFFIXES, READ_FORMATS, atomic_path, read_image
+from wise.io import atomic_path, images_in, read_image
 
 PSNR_CAP = 60.0
 """PSNR counted for a recovered image identical to the reference (beyond 8-bit precision)."""
@@ -43,17 +42,6 @@ def random_reference(
         if float(reference.std()) >= MIN_REFERENCE_CONTRAST:
             break
     return truth, reference
-
-
-def photos_in(folder: str) -> list[Path]:
-    """The images of a folder, sorted by name."""
-    path = Path(folder)
-    if not path.is_dir():
-        raise WiseError(f"{path}: not a directory of images")
-    found = sorted(p for p in path.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
-    if not found:
-        raise WiseError(f"{path}: no images ({', '.join(READ_FORMATS.values())}) found")
-    return found
 
 
 def content_at(photo: torch.Tensor, size: int) -> torch.Tensor:
@@ -90,7 +78,7 @@ def run_trials(
 ) -> dict:
     """Run ``trials`` trials, print their rows, and return (and write to ``json_path``) the
     summary of the finished ones with ``interrupted`` set."""
-    photos = photos_in(images_dir)
+    photos = images_in(images_dir)
     contents = {path: content_at(read_image(path), size) for path in photos[:trials]}
     generator = torch.Generator().manual_seed(seed)
     headings = ["trial", "image", *(c.heading for c in columns)]

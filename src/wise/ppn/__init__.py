@@ -22,53 +22,35 @@ Backbones start from random weights or from ImageNet weights the user provides
 
 from __future__ import annotations
 
-from torch import nn
+import importlib
+from typing import Any
 
-from wise.errors import WiseError
-from wise.ppn.multifeature import MultiFeaturePPN
-from wise.ppn.resnet import ResNetPPN
-from wise.ppn.simple import SimpleNet
-from wise.ppn.stats import StatsNet
-from wise.ppn.tone import ToneNet
-from wise.ppn.unet import LocalPPN
+from wise.ppn.choices import ARCHITECTURE_NAMES, LOCAL_ARCHITECTURE_NAMES
 
-ARCHITECTURES: dict[str, type[nn.Module]] = {
-    "simple": SimpleNet,
-    "stats": StatsNet,
-    "tone": ToneNet,
-    "resnet": ResNetPPN,
-    "multifeature": MultiFeaturePPN,
+# PyTorch loads with the first network asked for, not with the package: the commands check their
+# arguments against wise.ppn.choices before that.
+_LAZY = {
+    "ARCHITECTURES": "wise.ppn.registry",
+    "LOCAL_ARCHITECTURES": "wise.ppn.registry",
+    "create": "wise.ppn.registry",
+    "create_local": "wise.ppn.registry",
+    "LocalPPN": "wise.ppn.unet",
+    "MultiFeaturePPN": "wise.ppn.multifeature",
+    "ResNetPPN": "wise.ppn.resnet",
+    "SimpleNet": "wise.ppn.simple",
+    "StatsNet": "wise.ppn.stats",
+    "ToneNet": "wise.ppn.tone",
 }
 
-LOCAL_ARCHITECTURES: dict[str, type[nn.Module]] = {"unet": LocalPPN}
+
+def __getattr__(name: str) -> Any:
+    if name not in _LAZY:
+        raise AttributeError(f"module 'wise.ppn' has no attribute {name!r}")
+    return getattr(importlib.import_module(_LAZY[name]), name)
 
 
-def create(architecture: str, params: int) -> nn.Module:
-    """A network by name (a key of :data:`ARCHITECTURES`) predicting ``params`` values."""
-    if architecture not in ARCHITECTURES:
-        raise WiseError(f"unknown architecture {architecture!r}; use one of {', '.join(ARCHITECTURES)}")
-    if params < 1:
-        raise WiseError(f"a network must predict at least one parameter, got {params}")
-    return ARCHITECTURES[architecture](params)
+def __dir__() -> list[str]:
+    return sorted((*globals(), *_LAZY))
 
 
-def create_local(architecture: str, params: int, **options: int) -> nn.Module:
-    """A local network by name (``unet``) painting ``params`` masks; ``options`` are its
-    constructor's (e.g. ``depth``, ``width``, ``max_width``)."""
-    if architecture not in LOCAL_ARCHITECTURES:
-        raise WiseError(f"unknown local architecture {architecture!r}; use one of {', '.join(LOCAL_ARCHITECTURES)}")
-    return LOCAL_ARCHITECTURES[architecture](params, **options)
-
-
-__all__ = [
-    "ARCHITECTURES",
-    "LOCAL_ARCHITECTURES",
-    "LocalPPN",
-    "MultiFeaturePPN",
-    "ResNetPPN",
-    "SimpleNet",
-    "StatsNet",
-    "ToneNet",
-    "create",
-    "create_local",
-]
+__all__ = ["ARCHITECTURE_NAMES", "LOCAL_ARCHITECTURE_NAMES", *_LAZY]

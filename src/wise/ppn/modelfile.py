@@ -41,7 +41,7 @@ from wise import effects
 from wise.errors import WiseError
 from wise.files import MAX_MODEL_BYTES, read_safetensors, read_safetensors_header, safetensors_path
 from wise.io import atomic_path
-from wise.ppn import ARCHITECTURES, LOCAL_ARCHITECTURES, create, create_local
+from wise.ppn.registry import ARCHITECTURES, LOCAL_ARCHITECTURES, create, create_local
 from wise.ppn.translation import ARCHITECTURE as TRANSLATOR
 from wise.ppn.translation import NO_EFFECT, build_translator
 

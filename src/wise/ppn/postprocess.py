@@ -19,9 +19,9 @@ import torch.nn.functional as F
 from torch import nn
 
 from wise.errors import WiseError
+from wise.ppn.choices import POST_WIDTH
 
-DEFAULT_WIDTH = 64
-"""Channels of the first layer (pix2pix's ``ngf``)."""
+DEFAULT_WIDTH = POST_WIDTH
 RESNET_BLOCKS = 9
 """Residual blocks of Johnson et al.'s network for 256-pixel pictures."""
 UNET_DEPTH = 8

@@ -18,15 +18,12 @@ from wise import effects
 from wise.effects.base import Effect
 from wise.effects.catalogue import NO_EFFECT
 from wise.errors import WiseError
-from wise.ppn.postprocess import DEFAULT_WIDTH, POST_NETWORKS, create_post
+from wise.ppn.choices import NO_POST, POST_KINDS, PPN_KINDS
+from wise.ppn.postprocess import DEFAULT_WIDTH, create_post
 from wise.ppn.unet import LocalPPN
 
 ARCHITECTURE = "translator"
 """The architecture name of a translator in model files."""
-PPN_KINDS = ("local", "preset")
-"""``local``: masks painted by a local PPN; ``preset``: the effect's fixed preset everywhere."""
-NO_POST = "none"
-POST_KINDS = (*POST_NETWORKS, NO_POST)
 
 
 class Stages(NamedTuple):

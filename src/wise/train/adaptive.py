@@ -33,7 +33,7 @@ import sys
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Mapping, TextIO
+from typing import Mapping, TextIO
 
 import torch
 import torch.nn.functional as F
@@ -45,12 +45,12 @@ from wise.interrupt import ctrl_c
 from wise.io import atomic_path, write_image, write_together
 from wise.paramfile import save_params
 from wise.train import regions
+from wise.train.choices import ADAPTIVE_SPLITS, MIN_CHANGE, TASK_FILE
 from wise.train.data import photo_files, read_photos, split_files
-from wise.train.local_settings import TASK_FILE
 from wise.train.pairs import PARAMS_FOLDER, PARAMS_SUFFIX, PHOTO_FOLDER, REGION_FOLDER, TARGET_FOLDER
+from wise.train.tasks import Change, Task, task_named
 
-SPLITS = ("train", "test")
-"""The split folders written (pix2pix's names)."""
+SPLITS = ADAPTIVE_SPLITS
 FOLDERS = (PHOTO_FOLDER, TARGET_FOLDER, REGION_FOLDER, PARAMS_FOLDER)
 MIN_PHOTOS = 2
 """Fewest readable photos: one for each split."""
@@ -64,98 +64,10 @@ BYTE = 255.0
 NAME_DIGITS = 3
 DISAMBIGUATOR_LENGTH = 6
 """Hexadecimal digits of a path's hash added to photo stems that several photos share."""
-MIN_CHANGE = 0.005
-"""Default least mean absolute difference between a pair's target and the preset's rendering of
-its photo: on flat or abstract pictures the change does not show (XDoG draws nothing there),
-and such a pair teaches a network nothing."""
 ATTEMPTS = 4
 """Crops tried for a pair before it is left out because the change never shows."""
 DEFAULT_PRESETS = {"xdog": "portrait"}
 """An effect's default preset; the first one it declares for the others."""
-
-
-@dataclass(frozen=True)
-class Change:
-    """The parameter a task changes for one effect, its real value inside the region, and the
-    preset of the other parameters when it is not the effect's default (:func:`task_preset`)."""
-
-    parameter: str
-    inside: float
-    preset: str | None = None
-
-
-@dataclass(frozen=True)
-class Task:
-    """A synthetic task: the rule that finds the region, in one sentence, and per effect the
-    parameter it changes there."""
-
-    name: str
-    rule: Callable[[torch.Tensor], torch.Tensor]
-    """``(B, 3, H, W)`` in [0, 1] -> soft region ``(B, 1, H, W)`` in [0, 1]."""
-    description: str
-    changes: Mapping[str, Change]
-
-    def change(self, effect: str) -> Change:
-        """The change for ``effect``; refuses effects the task has no parameter for."""
-        if effect not in self.changes:
-            supported = ", ".join(sorted(self.changes))
-            raise WiseError(
-                f"the {self.name!r} task has no parameter for the effect {effect!r}; supported effects: {supported}"
-            )
-        return self.changes[effect]
-
-
-TASKS: dict[str, Task] = {
-    task.name: task
-    for task in (
-        Task(
-            "contours",
-            regions.low_contrast_region,
-            "the region is where the local contrast (standard deviation) of the luminance is low compared with "
-            "the rest of the photo, where edges are weak",
-            {
-                # the largest reachable strength: faint edges turn into lines, strong ones thicken
-                "xdog": Change("contour", 2.8),
-                "cartoon": Change("contour", 2.8),
-                # pencil contours drawn where the washes alone would lose the weak edges
-                "watercolor": Change("contour", 0.9),
-            },
-        ),
-        Task(
-            "details",
-            regions.fine_texture_region,
-            "the region is where fine texture (the luminance minus a slight blur) makes up much of the local "
-            "luminance energy compared with the rest of the photo, as on grass, bark or fur",
-            {
-                # near the coarsest reachable abstraction: texture turns into a few blobs and strokes;
-                # half-toned, so that the abstraction shows in the tones of the whole region, not
-                # only where lines cross it
-                "xdog": Change("details", 0.3, preset="pencil"),
-                "cartoon": Change("details", 0.3),
-            },
-        ),
-        Task(
-            "background",
-            regions.background_region,
-            "the region is the background: everything but the subject, the subject being where colour saliency "
-            "(Lab distance from the photo's mean colour), sharpness and a centre prior are high, holes filled",
-            {
-                # a brighter input fades most lines and black areas of the drawing away (a lower contour
-                # alone leaves the black areas, which grow); half-toned, so that the whole background
-                # pales, not only its lines
-                "xdog": Change("brightness", 0.45, preset="sketch"),
-                # no outlines: the background turns into soft colour areas
-                "cartoon": Change("contour", 0.2),
-            },
-        ),
-    )
-}
-
-
-def task_named(name: str) -> Task:
-    if name not in TASKS:
-        raise WiseError(f"unknown task {name!r}; tasks: {', '.join(TASKS)}")
-    return TASKS[name]
 
 
 def task_preset(task: Task, effect: Effect) -> str:

@@ -36,6 +36,7 @@ from wise.filters._checks import REFERENCE_SHORT_SIDE
 from wise.io import IMAGE_SUFFIXES, atomic_path, read_image
 from wise.optimize.trials import MAX_DRAWS, MIN_REFERENCE_CONTRAST
 from wise.train.augment import augment
+from wise.train.choices import MIXTURE_PRESET_SHARE, SAMPLINGS
 from wise.train.procedural import dead_leaves
 
 MIN_PHOTOS = 4
@@ -44,11 +45,6 @@ SCALE_RANGE = (0.6, 1.0)
 """A crop covers this fraction of the photo's short side (before it is resized to the training size)."""
 PRESET_SPREAD = 0.1
 """Standard deviation (normalized units) of parameters drawn around a preset."""
-SAMPLINGS = ("uniform", "presets", "mixture")
-MIXTURE_PRESET_SHARE = 0.3
-"""Share of the examples drawn around a preset by the ``mixture`` sampling."""
-PROCEDURAL_SHARE = 0.25
-"""Default share of the training examples on dead-leaves pictures instead of photos."""
 REDRAWS_AT_ONCE = 4
 """Draws rendered together for an example whose first draw was blank."""
 PROCEDURAL_PICTURES = 96

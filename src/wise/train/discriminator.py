@@ -7,8 +7,8 @@ import torch.nn.functional as F
 from torch import nn
 
 from wise.errors import WiseError
+from wise.train.choices import GAN_LOSSES
 
-GAN_LOSSES = ("lsgan", "vanilla")
 DEFAULT_WIDTH = 64
 SLOPE = 0.2
 LAYERS = 3

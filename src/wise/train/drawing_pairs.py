@@ -23,10 +23,10 @@ from wise.errors import WiseError
 from wise.interrupt import ctrl_c
 from wise.io import atomic_path, write_image, write_together
 from wise.train.adaptive import SPLITS, Photo, pair_counts, pair_name, random_crop, schedule_pairs, split_photos
+from wise.train.choices import DESCRIPTION_FILE
 from wise.train.drawing import draw
 from wise.train.pairs import PHOTO_FOLDER, TARGET_FOLDER
 
-DESCRIPTION_FILE = "drawing.json"
 ARTIST = "wise.train.drawing (outlines and hatching)"
 
 

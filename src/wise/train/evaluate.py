@@ -26,7 +26,8 @@ from wise.interrupt import ctrl_c
 from wise.io import atomic_path, read_image
 from wise.ppn.predictor import LocalPredictor
 from wise.ppn.translation import NO_EFFECT, Stages
-from wise.train.local_settings import TASK_FILE, read_task
+from wise.train.choices import TASK_FILE
+from wise.train.local_settings import read_task
 from wise.train.losses import total_variation
 from wise.train.pairs import SPLITS, Pair, check_pairs, dataset_root, pairs_in
 from wise.train.pairs_page import PAGE_PAIRS, write_pairs_page

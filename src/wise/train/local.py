@@ -21,8 +21,9 @@ import torch
 from torch.utils.data import DataLoader
 
 from wise.filters.smoothing import annealed_temperature, smoothed_steps, softened_gradients
+from wise.ppn.choices import NO_POST
 from wise.ppn.postprocess import DEFAULT_WIDTH
-from wise.ppn.translation import NO_POST, Stages, build_translator, translator_options
+from wise.ppn.translation import Stages, build_translator, translator_options
 from wise.train.discriminator import PatchDiscriminator, adversarial_loss
 from wise.train.losses import total_variation
 from wise.train.pairs import PairDataset

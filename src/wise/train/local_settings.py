@@ -10,18 +10,15 @@ from pathlib import Path
 import torch
 
 from wise import effects
+from wise.effects.catalogue import NO_EFFECT
 from wise.errors import WiseError
+from wise.ppn.choices import NO_POST, POST_KINDS, PPN_KINDS
 from wise.ppn.modelfile import model_info, resolve_model
 from wise.ppn.postprocess import DEFAULT_WIDTH
-from wise.ppn.translation import NO_EFFECT, NO_POST, POST_KINDS, PPN_KINDS
-from wise.train.discriminator import GAN_LOSSES
+from wise.train.choices import DIRECTIONS, GAN_LOSSES, LR_SCHEDULES, TASK_FILE
 from wise.train.pairs import Pair, check_pairs, pair_files
-from wise.train.schedules import LR_SCHEDULES
 from wise.train.settings import check_resumed, check_run_folder
 
-TASK_FILE = "task.json"
-"""Written by ``wise data adaptive`` into a pairs folder: the task, its effect and preset."""
-DIRECTIONS = ("AtoB", "BtoA")
 LOCAL_RESUMABLE = (
     "effect", "pairs", "start", "depth", "width", "max_width", "discriminator_width", "gan_weight", "batch",
     "load_size", "crop_size", "seed", "direction", "post", "post_width", "ppn", "dropout",

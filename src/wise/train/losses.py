@@ -7,8 +7,7 @@ import torch
 
 from wise.effects.base import Effect
 from wise.errors import WiseError
-
-LOSSES = ("image-l1", "image-l2", "param-l1", "param-l2")
+from wise.train.choices import LOSSES
 
 
 def _distance(a: torch.Tensor, b: torch.Tensor, norm: str) -> torch.Tensor:

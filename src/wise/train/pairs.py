@@ -45,11 +45,10 @@ from wise.io.common import one_line
 from wise.io.formats import webp_size
 from wise.io.limits import check_pixels
 from wise.io.read import _decoding
+from wise.train.choices import DIRECTIONS
 
 SPLITS = ("train", "val", "test")
 """Split folders of a pairs folder (pix2pix's names)."""
-DIRECTIONS = ("AtoB", "BtoA")
-"""pix2pix's ``--direction``: which side is the input (``photo``)."""
 PHOTO_FOLDER, TARGET_FOLDER = "A", "B"
 REGION_FOLDER = "regions"
 PARAMS_FOLDER = "params"

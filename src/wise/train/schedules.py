@@ -7,8 +7,8 @@ import math
 import torch
 
 from wise.errors import WiseError
+from wise.train.choices import LR_SCHEDULES
 
-LR_SCHEDULES = ("constant", "cosine", "linear")
 COSINE_FLOOR = 0.05
 """The cosine schedule's learning rate at the end of the run, as a share of ``lr``."""
 LINEAR_DECAY_SHARE = 0.5

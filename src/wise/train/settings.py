@@ -15,8 +15,8 @@ import torch
 
 from wise import effects, ppn
 from wise.errors import WiseError, WiseWarning
-from wise.train.data import SAMPLINGS, SCALE_RANGE, checked_photos, photo_files, read_photos, split_files
-from wise.train.losses import LOSSES
+from wise.train.choices import LOSSES, SAMPLINGS
+from wise.train.data import SCALE_RANGE, checked_photos, photo_files, read_photos, split_files
 
 CHECKPOINT = Path("checkpoints") / "last.ckpt"
 SETTINGS_FILE = "settings.json"
