@@ -116,30 +116,32 @@ def test_placement() -> None:
 
 
 def test_same_files_as_the_local_path(
-    photos: Path, reference: dict[str, bytes], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    photos: Path,
+    reference: dict[str, bytes],
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
 ) -> None:
-    """Ray started here (2 cores) and stopped after; every result byte for byte the local one,
-    the corrupt image reported by name, one log line per image."""
+    """``wise apply --ray``: Ray started here (2 cores) and stopped after; every result byte for
+    byte the local one, the corrupt image reported by name, one log line per image."""
+    from wise.cli import main
+
     monkeypatch.setattr(distributed, "usable_cores", lambda: 2)
     was_running = ray.is_initialized()
-    out = tmp_path / "out"
-    jobs = plan([str(photos)], out)
-    log = JsonLog(tmp_path / "log.jsonl")
-    try:
-        summary = run_on_ray(LOOK, jobs, log=log)
-    finally:
-        log.close()
+    out, log = tmp_path / "out", tmp_path / "log.jsonl"
+    code = main(["apply", "xdog", str(photos), "-o", str(out), "--preset", "portrait", "--ray", "--log", str(log)])
+    captured = capsys.readouterr()
+    assert code == 1, captured.err
     assert ray.is_initialized() == was_running
-    assert summary.done == len(SIZES) and summary.skipped == 0 and not summary.interrupted
-    assert [failure.input for failure in summary.failed] == [str(photos / "sub" / "corrupt.jpg")]
-    failure = summary.failed[0]
-    assert failure.status == FAILED and failure.error.startswith(f"{failure.input}: ")
-    assert failure.output == str(out / "sub" / "corrupt.png")
+    assert f"{photos / 'sub' / 'corrupt.jpg'}: " in captured.err and "4 written" in captured.out
     assert {path.name: path.read_bytes() for path in out.rglob("*.png")} == reference
     assert not list(out.rglob(".*"))  # no temporary file left
-    records = [json.loads(line) for line in (tmp_path / "log.jsonl").read_text().splitlines()]
+    records = [json.loads(line) for line in log.read_text().splitlines()]
+    jobs = plan([str(photos)], out)
     assert sorted(record["input"] for record in records) == sorted(str(job.source) for job in jobs)
     assert sorted(record["status"] for record in records) == ["done"] * len(SIZES) + ["failed"]
+    failed = next(record for record in records if record["status"] == FAILED)
+    assert failed["output"] == str(out / "sub" / "corrupt.png") and failed["error"].startswith(f"{failed['input']}: ")
 
 
 def test_resumes_skips_and_overwrites(
@@ -223,19 +225,6 @@ def test_an_image_that_kills_its_worker_fails_alone(
     assert {path.name: path.read_bytes() for path in out.rglob("*.png")} == {
         name: data for name, data in reference.items() if name != "photo1.png"
     }
-
-
-def test_the_command_line_on_ray_writes_the_local_files(
-    cluster, photos: Path, reference: dict[str, bytes], tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
-    from wise.cli import main
-
-    out = tmp_path / "out"
-    code = main(["apply", "xdog", str(photos), "-o", str(out), "--preset", "portrait", "--ray"])
-    captured = capsys.readouterr()
-    assert code == 1, captured.err
-    assert "corrupt.jpg" in captured.err and "4 written" in captured.out
-    assert {p.name: p.read_bytes() for p in out.rglob("*.png")} == reference
 
 
 def test_the_command_line_without_ray_refuses_in_one_line(
