@@ -35,3 +35,14 @@ def astronaut() -> torch.Tensor:
 def astronaut_small(astronaut: torch.Tensor) -> torch.Tensor:
     """The astronaut at 128x128."""
     return F.interpolate(astronaut, size=(128, 128), mode="area")
+
+
+@pytest.fixture
+def brief_readings(monkeypatch: pytest.MonkeyPatch) -> None:
+    """One iteration for each candidate's brief descent and for the cartoon's colour fit, where a
+    test runs a command through the readings but checks none of what they read (the users' twenty
+    and two hundred iterations take about 20 s even on a 32-pixel picture)."""
+    from wise.optimize import inversion
+
+    monkeypatch.setattr(inversion, "SEARCH_ITERATIONS", 1)
+    monkeypatch.setattr(inversion, "FIT_ITERATIONS", 1)

@@ -6,6 +6,7 @@ import torch
 from safetensors.torch import save_file
 
 import wise.files
+import wise.nst
 from tests.weights import sparse_weights
 from wise.cli import main
 from wise.errors import WiseError
@@ -59,7 +60,10 @@ def test_optimize_with_the_nst_loss(weights: Path, tmp_path: Path, capsys) -> No
     assert not (tmp_path / "refused").exists()
 
 
-def test_transfer_by_gatys_with_user_weights(weights: Path, tmp_path: Path, capsys) -> None:
+def test_transfer_by_gatys_with_user_weights(
+    weights: Path, tmp_path: Path, capsys, monkeypatch, brief_readings: None
+) -> None:
+    monkeypatch.setattr(wise.nst, "GATYS_STEPS", 2)  # the command's path, not the users' 200 steps
     content, style = tmp_path / "c.png", tmp_path / "s.png"
     write_image(torch.rand(1, 3, 32, 40), content)
     write_image(torch.rand(1, 3, 24, 24), style)

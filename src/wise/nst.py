@@ -68,12 +68,13 @@ GATYS_LR = 0.02
 
 
 def stylize_gatys(
-    content: torch.Tensor, style: torch.Tensor, vgg_weights: str | None = None, steps: int = GATYS_STEPS
+    content: torch.Tensor, style: torch.Tensor, vgg_weights: str | None = None, steps: int | None = None
 ) -> torch.Tensor:
     """Neural style transfer by optimizing the pixels (Gatys et al. 2016) on VGG-19 features.
 
     Starts from the content and runs Adam on the content + Gram-matrix style loss of
-    :class:`wise.vgg.StyleLoss`. Needs VGG-19 weights (see :mod:`wise.vgg`).
+    :class:`wise.vgg.StyleLoss` for ``steps`` (default :data:`GATYS_STEPS`). Needs VGG-19 weights
+    (see :mod:`wise.vgg`).
     """
     from wise.vgg import StyleLoss, load_vgg19
 
@@ -81,7 +82,7 @@ def stylize_gatys(
     loss = StyleLoss(vgg, content, style)
     image = content.detach().clone().requires_grad_()
     optimizer = torch.optim.Adam([image], lr=GATYS_LR)
-    for _ in range(steps):
+    for _ in range(GATYS_STEPS if steps is None else steps):
         optimizer.zero_grad(set_to_none=True)
         loss(image).backward()
         optimizer.step()

@@ -216,6 +216,7 @@ def test_an_image_that_kills_its_worker_fails_alone(
             return super().__call__(batch)
 
     monkeypatch.setattr(distributed, "_Stylizer", Crashing)
+    monkeypatch.setattr(distributed, "TASK_RETRIES", 1)  # tried again once: a restart less to wait for
     out = tmp_path / "out"
     jobs = _good(plan([str(photos)], out))
     summary = run_on_ray(LOOK, jobs)

@@ -20,7 +20,6 @@ import wise.predict
 from tests.cli.helpers import run_in_process
 from wise import ppn
 from wise.io import read_image
-from wise.optimize import inversion
 from wise.optimize.inversion import FITTED_PARAMS, INVERTED_PARAMS
 from wise.optimize.parametric import Outcome
 from wise.optimize.trials import content_at, random_reference
@@ -184,11 +183,8 @@ def test_bench_ppn_measures_the_refined_prediction_too(files: dict[str, Path]) -
     assert result["refined"]["mean_ssim"] == pytest.approx(np.mean([r["refined_ssim"] for r in result["trials"]]))
 
 
-def test_recover_starts_from_the_prediction(files: dict[str, Path], monkeypatch: pytest.MonkeyPatch) -> None:
-    # the readings before descent only change the parameters left out of the comparison below:
-    # one iteration of each of their searches, not the users' twenty and two hundred
-    monkeypatch.setattr(inversion, "SEARCH_ITERATIONS", 1)
-    monkeypatch.setattr(inversion, "FIT_ITERATIONS", 1)
+def test_recover_starts_from_the_prediction(files: dict[str, Path], brief_readings: None) -> None:
+    # the readings before descent only change the parameters left out of the comparison below
     root = files["root"]
     model = root / "cartoon-model.safetensors"
     code, _ = run_in_process(

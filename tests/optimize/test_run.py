@@ -27,7 +27,7 @@ def optimize_args(images: tuple[Path, Path], out: Path, *extra: str) -> list[str
     return ["optimize", "cartoon", "--content", str(content), "--target", str(target), "-o", str(out), *extra]
 
 
-def test_optimize_writes_every_output_and_apply_reproduces_the_result(images, tmp_path: Path) -> None:
+def test_optimize_writes_every_output_and_apply_reproduces_the_result(images, tmp_path: Path, brief_readings) -> None:
     out = tmp_path / "run"
     assert main(optimize_args(images, out, "--iters", "6", "--size", "48")) == 0
     assert {p.name for p in out.iterdir()} >= {
@@ -48,7 +48,7 @@ def test_optimize_writes_every_output_and_apply_reproduces_the_result(images, tm
     assert torch.equal(read_image(again), read_image(out / "result.png"))
 
 
-def test_an_interrupted_run_writes_a_state_that_resumes(images, tmp_path: Path, monkeypatch) -> None:
+def test_an_interrupted_run_writes_a_state_that_resumes(images, tmp_path: Path, monkeypatch, brief_readings) -> None:
     import wise.optimize.run as run_module
 
     calls = {"n": 0}
@@ -83,7 +83,7 @@ def test_a_target_of_another_aspect_is_refused(images, tmp_path: Path, capsys) -
     assert not out.exists()
 
 
-def test_a_target_of_another_size_is_resized(images, tmp_path: Path, capsys) -> None:
+def test_a_target_of_another_size_is_resized(images, tmp_path: Path, capsys, brief_readings) -> None:
     bigger = tmp_path / "bigger.png"
     write_image(F.interpolate(read_image(images[1]), size=(96, 128), mode="bilinear"), bigger)
     args = ["optimize", "cartoon", "--content", str(images[0]), "--target", str(bigger), "-o", str(tmp_path / "o")]
