@@ -214,14 +214,15 @@ def test_the_built_in_model_predicts_at_512_pixels_within_a_second(effect: str, 
     Image.fromarray((example[0].permute(1, 2, 0).numpy() * 255).round().astype(np.uint8)).save(tmp_path / "ex.png")
     command = ["predict", effect, "--content", str(tmp_path / "photo.png"), "--target", str(tmp_path / "ex.png"),
                "-o", str(tmp_path / "out")]  # fmt: skip
-    if effect == "xdog":  # the whole command with its default refinement, in a new process, once
+    if effect == "xdog":  # the whole command with a refinement, in a new process, once
         began = time.perf_counter()
         process = subprocess.run(
-            [sys.executable, "-m", "wise", *command], capture_output=True, text=True, env=_env(), timeout=120
-        )
+            [sys.executable, "-m", "wise", *command, "--budget", "2"], capture_output=True, text=True, env=_env(),
+            timeout=120,
+        )  # fmt: skip
         seconds = time.perf_counter() - began
         assert process.returncode == 0, process.stderr
-        assert seconds < 30.0  # 10 s on the development machine; CI machines are slower
+        assert seconds < 24.0  # 10 s with the default 8-s budget on the development machine; CI machines are slower
     else:  # the network alone for the others
         code, printed = run_in_process([*command, "--refine", "0"])
         assert code == 0, printed

@@ -67,11 +67,9 @@ def test_two_ddp_processes_equal_one_with_the_same_global_batch(photos: Path, tm
     # A parameter-space loss: with Adam, float rounding of tiny gradients through XDoG's thresholds
     # (other batch shapes, the all-reduce) would show as well, and this is about the batches.
     common = ["train", "global", "xdog", "--images", str(photos), "--steps", "4", *TINY, "--loss", "param-l1"]
-    one = subprocess.run(
-        _wise([*common, "-o", str(tmp_path / "one"), "--batch", "8"], tmp_path),
-        capture_output=True, text=True, env=_env(), timeout=300,
-    )  # fmt: skip
-    assert one.returncode == 0, one.stderr[-2000:]
+    from wise.cli import main
+
+    assert main([*common, "-o", str(tmp_path / "one"), "--batch", "8"]) == 0  # one process: this one
     two = subprocess.run(
         _wise([*common, "-o", str(tmp_path / "two"), "--batch", "4", "--devices", "2"], tmp_path),
         capture_output=True, text=True, env=_env(), timeout=300,
@@ -112,18 +110,14 @@ def test_ctrl_c_saves_a_checkpoint_and_the_run_resumes(
     assert load_model(run / "model.safetensors", "oilpaint")[1].settings["steps_done"] == stopped_at
     assert (run / "report.html").read_text().rstrip().endswith("</html>")
 
+    from wise.cli import main
+
     target = stopped_at + 6
-    resumed = subprocess.run(
-        _wise([*argv, "--steps", str(target), "--resume"], tmp_path), capture_output=True, text=True,
-        env=_env(), timeout=300,
-    )  # fmt: skip
-    assert resumed.returncode == 0, resumed.stderr[-2000:]
+    assert main([*argv, "--steps", str(target), "--resume"]) == 0  # resumed in this process
     assert torch.load(run / CHECKPOINT, weights_only=True)["global_step"] == target
     assert load_model(run / "model.safetensors")[1].settings["steps_done"] == target
     assert sorted(p.parent.name for p in (run / "logs").glob("*/metrics.csv")) == ["0", "1"]
     assert json.loads((run / "settings.json").read_text())["steps"] == target
-
-    from wise.cli import main
 
     capsys.readouterr()
     assert main(argv) == 2 and "pass --resume" in capsys.readouterr().err  # refused, in this process
