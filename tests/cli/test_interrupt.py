@@ -96,7 +96,7 @@ def test_bench_recover_writes_the_finished_trials(photos: Path, tmp_path: Path) 
     (folder / "a.png").write_bytes((photos / "photo.png").read_bytes())
     out = tmp_path / "bench.json"
     argv = ["bench", "recover", "xdog", "--images", str(folder), "--json", str(out), "--size", "32"]
-    proc = _start([*argv, "--trials", "50", "--iters", "60"], tmp_path)
+    proc = _start([*argv, "--trials", "50", "--iters", "20"], tmp_path)
     _wait_for(proc, "| 0 |")
     code, seconds, err = _interrupt(proc)
     assert code == 130 and seconds < STOP_WITHIN, (code, seconds, err)
