@@ -6,7 +6,7 @@ import wise
 from wise.effects import create
 from wise.metrics import ssim
 from wise.params import resize_masks
-from wise.render import masks_for_box, render, rerender, tile_shape, tiles
+from wise.render import enlarged, masks_for_box, reduced, render, rerender, tile_shape, tiles
 
 
 def test_tiles_cover_the_picture_once() -> None:
@@ -151,3 +151,21 @@ def test_rerendering_a_small_picture_equals_its_render(astronaut_small: torch.Te
     after[..., 2:4, 2:4] = 0.9
     drawn = render(effect, astronaut_small, before)
     assert torch.equal(rerender(effect, astronaut_small, after, before, drawn), render(effect, astronaut_small, after))
+
+
+@pytest.mark.parametrize(("name", "preset"), [("oilpaint", "impasto"), ("watercolor", "dry")])
+def test_a_small_pictures_medium_is_enlarged_with_it(name: str, preset: str, astronaut: torch.Tensor) -> None:
+    """Enlarged, rendered and reduced, a 256-pixel picture gets its bristles, relief, pigment and
+    paper grain enlarged as much, so that reduced they keep the pixel size of a 512-pixel render's
+    instead of half of it; the washes, lines and flow stay at the picture's scale."""
+    effect = create(name).eval()
+    params = effect.preset(preset)[None]
+    small = F.interpolate(astronaut, size=(256, 256), mode="area")
+    with torch.no_grad():
+        rendered = render(effect, small, params)
+        medium_enlarged = reduced(effect(enlarged(small), params, medium=2.0), (256, 256))
+        medium_at_reference = reduced(effect(enlarged(small), params), (256, 256))
+    assert torch.allclose(rendered, medium_enlarged, atol=1e-5)
+    changed = (rendered - medium_at_reference).abs()
+    assert float(changed.mean()) > 2e-3  # the texture moved
+    assert ssim(rendered, medium_at_reference) > 0.8  # the picture did not

@@ -9,7 +9,9 @@ building full-resolution masks.
 A picture whose short side is below the reference (512 pixels) is enlarged to it, rendered and
 reduced again: its look is the reference render's reduced to the picture, where a render at the
 picture's own size would shrink every structure scale of the effects under a pixel (lines break
-into dashes, brush strokes vanish).
+into dashes, brush strokes vanish). The medium's own texture (bristles and paint relief, pigment
+speckles, paper grain) is enlarged with the picture, so that reduced again it keeps its
+reference size in the pixels shown (:attr:`~wise.effects.base.RenderContext.medium`).
 """
 
 from __future__ import annotations
@@ -141,21 +143,36 @@ def render(
     tile; the result, on ``image``'s device, equals rendering the whole picture at once up
     to floating-point rounding, and above :data:`GUIDE_MAX_SCALE` up to a guide made at that scale.
     """
+    return _render(effect, image, params, tile, device, at_reference, None)
+
+
+def _render(
+    effect: Effect,
+    image: torch.Tensor,
+    params: torch.Tensor,
+    tile: int | None,
+    device: torch.device | str | None,
+    at_reference: bool,
+    medium: float | None,
+) -> torch.Tensor:
     device = torch.device(device) if device is not None else image.device
     batch, _, height, width = image.shape
     params = check_params(params, effect.param_specs, batch)
     if at_reference and min(height, width) < REFERENCE_SHORT_SIDE:
-        return reduced(render(effect, enlarged(image), params, tile, device), (height, width))
+        # the medium enlarged as much as the picture: reduced again, its texture keeps the
+        # reference size in the pixels shown instead of falling under a pixel
+        enlargement = REFERENCE_SHORT_SIDE / min(height, width)
+        return reduced(_render(effect, enlarged(image), params, tile, device, False, enlargement), (height, width))
     scale = min(height, width) / REFERENCE_SHORT_SIDE
     if (tile is None and height * width <= effect.tile_pixels) or (tile is not None and max(height, width) <= tile):
-        return effect(image.to(device), params.to(device), scale=scale).to(image.device)
+        return effect(image.to(device), params.to(device), scale=scale, medium=medium).to(image.device)
     guide = _guide(effect, image, params, scale, device) if effect.guide_channels else None
-    halo = _align(effect.halo(scale))
+    halo = _align(effect.halo(max(scale, medium or scale)))
     shape = tile_shape(height, width, halo, effect.tile_pixels) if tile is None else (_align(tile), _align(tile))
     out = torch.empty_like(image)
     for t, crop, crop_params in _tile_inputs(image, params, shape, halo, device):
         tile_guide = None if guide is None else guide[..., t.py0 : t.py1, t.px0 : t.px1].to(device)
-        result = effect(crop, crop_params, scale=scale, origin=(t.py0, t.px0), guide=tile_guide)
+        result = effect(crop, crop_params, scale=scale, origin=(t.py0, t.px0), guide=tile_guide, medium=medium)
         out[..., t.y0 : t.y1, t.x0 : t.x1] = _core(result, t).to(out.device)
     return out
 

@@ -45,6 +45,14 @@ class RenderContext:
     guide: torch.Tensor | None = None
     """This tile's crop of the whole picture's :meth:`Effect.guide`, when the renderer made it
     beforehand; ``None``: the effect computes it from the tile."""
+    medium: float | None = None
+    """Pixels per reference pixel of the medium's own texture (bristles, paint relief, pigment,
+    paper grain); ``None``: ``scale``. A picture rendered enlarged and then reduced gets textures
+    enlarged as much, so that they keep at least their reference size in the pixels shown."""
+
+    @property
+    def medium_scale(self) -> float:
+        return self.scale if self.medium is None else self.medium
 
 
 class Effect(nn.Module):
@@ -128,15 +136,17 @@ class Effect(nn.Module):
         scale: float | None = None,
         origin: tuple[int, int] = (0, 0),
         guide: torch.Tensor | None = None,
+        medium: float | None = None,
     ) -> torch.Tensor:
         """Stylize ``image`` (B, 3, H, W) in [0, 1] with normalized ``params`` (B, P) or (B, P, h, w).
 
         ``scale`` and ``origin`` describe the whole picture when ``image`` is one tile of it
         (see :class:`RenderContext`); by default the image is the whole picture. ``guide`` is
-        the tile's crop of :meth:`guide` made on the whole picture (only for effects that have one).
+        the tile's crop of :meth:`guide` made on the whole picture (only for effects that have one);
+        ``medium`` the scale of the medium's texture where it is not ``scale``.
         """
         values, context = self._prepare(image, params, scale, origin)
-        return self.render(image, values, RenderContext(context.scale, context.origin, guide))
+        return self.render(image, values, RenderContext(context.scale, context.origin, guide, medium))
 
     def guide(
         self,

@@ -139,10 +139,11 @@ class OilPaint(Effect):
         self, tangent: torch.Tensor, stroke_length: torch.Tensor, brush_size: torch.Tensor, ctx: RenderContext
     ) -> torch.Tensor:
         """The brush texture ``(B, 1, H, W)``: bristle noise smeared along the strokes, then across."""
-        bristles = value_noise(tangent[:, :1], BRISTLE_CELL, self.seed, origin=ctx.origin, scale=ctx.scale) - 0.5
-        strokes = self.stage(flow_smoothing, bristles, tangent, stroke_length, MAX_STROKE_STEPS, ctx.scale)
+        medium = ctx.medium_scale
+        bristles = value_noise(tangent[:, :1], BRISTLE_CELL, self.seed, origin=ctx.origin, scale=medium) - 0.5
+        strokes = self.stage(flow_smoothing, bristles, tangent, stroke_length, MAX_STROKE_STEPS, medium)
         across = gradient_direction(tangent)
-        grooves = self.stage(flow_smoothing, strokes, across, brush_size, MAX_STROKE_STEPS, ctx.scale)
+        grooves = self.stage(flow_smoothing, strokes, across, brush_size, MAX_STROKE_STEPS, medium)
         return BRISTLE_GAIN * grooves
 
     def render_guide(self, image: torch.Tensor, p: Mapping[str, torch.Tensor], ctx: RenderContext) -> torch.Tensor:
@@ -205,7 +206,7 @@ class OilPaint(Effect):
             LIGHT_DIRECTION,
             specular=p["specular"] * ridges * headroom,
             shininess=p["shininess"],
-            scale=scale,
+            scale=ctx.medium_scale,
         )
         lit = lit * (1.0 + CAVITY_SHADE * relief * torch.tanh(height))
         edges = self.stage(flow_log, abstracted[:, :1] / LUMINANCE_RANGE, tangent, EDGE_SIGMA, scale, MAX_EDGE_STEPS)

@@ -167,9 +167,12 @@ class Watercolor(Effect):
         across = gradient_direction(tangent)
         edges = edge_strength(structure, scale)
 
-        paper = paper_texture(luminance, seed, origin=origin, scale=scale)
+        # the paper's grain and the pigment's speckles at the medium's scale, the rest at the picture's
+        paper = paper_texture(luminance, seed, origin=origin, scale=ctx.medium_scale)
         turbulence_noise = value_noise(luminance, TURBULENCE_CELL, seed + 1, octaves=3, origin=origin, scale=scale)
-        dispersion_noise = value_noise(luminance, DISPERSION_CELL, seed + 2, octaves=2, origin=origin, scale=scale)
+        dispersion_noise = value_noise(
+            luminance, DISPERSION_CELL, seed + 2, octaves=2, origin=origin, scale=ctx.medium_scale
+        )
         tremor = value_noise(luminance, TREMOR_CELL, seed + 3, octaves=2, origin=origin, scale=scale)
 
         reduction = WASH_REDUCTION if scale >= WASH_REDUCTION_FROM_SCALE else 1
