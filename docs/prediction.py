@@ -26,6 +26,7 @@ from wise.io import image_to_tensor, tensor_to_image
 from wise.optimize.refine import answers, refine
 from wise.optimize.settings import DEFAULT_BUDGET
 from wise.ppn.predictor import Predictor, at_short_side
+from wise.render import render
 
 RENDER_SHORT_SIDE = 512
 CELL_HEIGHT = 200
@@ -61,13 +62,13 @@ def main() -> None:
         truth = effect.params_from_dict(known, preset=preset)[None]
         photo = _photo(photo_name)
         with torch.no_grad():
-            example = effect(photo, truth).clamp(0, 1)
+            example = render(effect, photo, truth)
             predicted = Predictor(None, effect_name)(photo, example)
-            rendered = effect(photo, predicted).clamp(0, 1)
+            rendered = render(effect, photo, predicted)
         outcome = refine(effect, photo, example, predicted, DEFAULT_BUDGET)
-        # as wise predict: the steps read off the example where descent from them ended further away
+        # as wise predict: the best of the network alone and the refinement's answers
         with torch.no_grad():
-            renders = [effect(photo, p).clamp(0, 1) for p in answers(outcome)]
+            renders = [render(effect, photo, p) for p in (predicted, *(answer for _, answer in answers(outcome)))]
             refined = max(renders, key=lambda r: metrics.ssim(r, example))
         scores = (metrics.ssim(rendered, example), metrics.ssim(refined, example))
         rows.append((effect_name, [_cell(photo), _cell(example), _cell(rendered), _cell(refined)], scores))

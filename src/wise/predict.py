@@ -62,10 +62,10 @@ def predict_files(
 ) -> dict:
     """Predict the parameters that re-create the target, refine them for ``refine_budget``
     seconds (:func:`wise.optimize.refine.refine`; None: the network alone), render the content
-    with them at full resolution, and write :data:`RESULT_FILES` into ``out_dir``. The
-    refinement is kept only when it re-creates the target better (SSIM at full resolution)
-    than the network alone; its answer is the steps read off the target where descent from them
-    ended further away. Returns the metrics: the result's, with the network's under
+    with them at full resolution, and write :data:`RESULT_FILES` into ``out_dir``. The answer
+    is whichever of the network alone and the refinement's answers
+    (:func:`wise.optimize.refine.answers`) re-creates the target best (SSIM at full resolution,
+    ties to the simpler); ``metrics.json`` names it. Returns the metrics: the result's, with the network's under
     ``network``."""
     effect = effects.create(effect_name)
     predictor = Predictor(model, effect_name, device)
@@ -92,23 +92,28 @@ def predict_files(
             mode=refine_mode, max_iterations=max_iterations,
         )  # fmt: skip
         interrupted = outcome.interrupted
-        scored = [(answer.cpu(), *_scores(effect, content, target, answer.cpu())) for answer in answers(outcome)]
-        refined_params, refined_result, refined_scores = max(scored, key=lambda s: s[2]["ssim"])
-        descended = refined_params is scored[0][0]
-        kept = refined_scores["ssim"] >= network_scores["ssim"]
+        # every answer judged against the example at the size it was given, the network's too:
+        # the answer is never worse than a simpler one
+        judged = [("network", predicted, result, network_scores)]
+        for name, answer in answers(outcome):
+            if not torch.equal(answer.cpu(), predicted):
+                judged.append((name, answer.cpu(), *_scores(effect, content, target, answer.cpu())))
+        best = max(judged, key=lambda entry: entry[3]["ssim"])  # ties to the first, the simpler
+        answer_name, params, result, refined_scores = best
         scores["refinement"] = {
             **refined_scores,
             "budget": refine_budget,
             "iterations": len(outcome.losses),
             "seconds": round(outcome.seconds, 2),
             "mode": refine_mode,
-            "answers": len(scored),
+            "answer": answer_name,
+            "why": "the highest SSIM against the example at its own size of the answers judged",
+            "answers": {name: round(entry_scores["ssim"], 4) for name, _, _, entry_scores in judged},
             "left_out": list(outcome.left_out),
-            "kept": kept,
-            "descent_kept": descended,
+            "kept": answer_name != "network",
+            "descent_kept": answer_name == "descent",
         }
-        if kept:
-            params, result = refined_params, refined_result
+        if answer_name != "network":
             scores.update(refined_scores)
             if params.dim() == 2:
                 scores["params"] = effect.params_to_dict(params[0])
@@ -125,7 +130,7 @@ def predict_files(
     refined = scores.get("refinement")
     how = ""
     if refined is not None:
-        verdict = "kept" if refined["kept"] else "not kept (the network alone scored higher)"
+        verdict = f"answer: {refined['answer']}" if refined["kept"] else "the network alone scored highest"
         how = f", refined for {refined['seconds']:.1f} s ({refined['iterations']} iterations, {verdict})"
         if refined["left_out"]:
             how += f", {' and '.join(refined['left_out'])} left out to fit the budget at this machine's speed"

@@ -1,4 +1,4 @@
-"""Rendering without autograd: large images tile by tile, small ones at the reference scale.
+"""Rendering: large images tile by tile, small ones at the reference scale.
 
 A tile is rendered with a halo of the pixels its pipeline reads around it, with the scale and
 position of the whole picture, and only its core is kept, so the tiles join without seams.
@@ -12,6 +12,9 @@ picture's own size would shrink every structure scale of the effects under a pix
 into dashes, brush strokes vanish). The medium's own texture (bristles and paint relief, pigment
 speckles, paper grain) is enlarged with the picture, so that reduced again it keeps its
 reference size in the pixels shown (:attr:`~wise.effects.base.RenderContext.medium`).
+
+:func:`render` renders without autograd; :class:`Look` draws a picture, or a box of it, the same
+way with autograd, for the optimizations that fit parameters to an example of that size.
 """
 
 from __future__ import annotations
@@ -123,6 +126,84 @@ def enlarged(image: torch.Tensor) -> torch.Tensor:
 def reduced(image: torch.Tensor, size: tuple[int, int]) -> torch.Tensor:
     """``image`` (B, C, H, W) reduced to ``size`` with an antialiasing filter."""
     return F.interpolate(image, size=size, mode="bilinear", antialias=True, align_corners=False).clamp(0.0, 1.0)
+
+
+def reduction_weights(source: int, size: int, like: torch.Tensor) -> torch.Tensor:
+    """The ``(size, source)`` matrix of :func:`reduced` along one side: row ``i`` holds the
+    weights of the source pixels that make pixel ``i`` of the reduction."""
+    identity = torch.eye(source, dtype=like.dtype, device=like.device).reshape(1, 1, source, source)
+    return F.interpolate(identity, size=(size, source), mode="bilinear", antialias=True, align_corners=False)[0, 0]
+
+
+class Look:
+    """How :func:`render` draws ``content`` (1, 3, H, W) with ``effect``, differentiable in the
+    parameters: a picture whose short side is below the reference enlarged to it
+    (:func:`enlarged`, the medium with it) and the render reduced back (:func:`reduced`), so that
+    descent fits the look the user's render shows; ``at_reference=False`` draws it at its own
+    scale (a reduced working copy, where that look is an approximation taken for speed)."""
+
+    def __init__(self, effect: Effect, content: torch.Tensor, at_reference: bool = True) -> None:
+        self.effect = effect
+        self.size: tuple[int, int] = (content.shape[-2], content.shape[-1])
+        short = min(self.size)
+        self.enlargement = REFERENCE_SHORT_SIDE / short if at_reference and short < REFERENCE_SHORT_SIDE else 1.0
+        self.source = enlarged(content) if self.enlargement > 1.0 else content
+        self.scale = min(self.source.shape[-2:]) / REFERENCE_SHORT_SIDE
+        self.medium = self.enlargement if self.enlargement > 1.0 else None
+        if self.enlargement > 1.0:
+            self.rows = reduction_weights(self.source.shape[-2], self.size[0], content)
+            self.columns = reduction_weights(self.source.shape[-1], self.size[1], content)
+
+    def __call__(self, params: torch.Tensor) -> torch.Tensor:
+        """The whole picture, (1, 3, H, W)."""
+        output = self.effect(self.source, params, scale=self.scale, medium=self.medium)
+        if self.enlargement == 1.0:
+            return output
+        return F.interpolate(output, size=self.size, mode="bilinear", antialias=True, align_corners=False)
+
+    def box(self, params: torch.Tensor, top: int, left: int, height: int, width: int, context: int) -> torch.Tensor:
+        """The picture's ``[top, top + height) x [left, left + width)``, rendered from the
+        pixels it reads plus ``context`` pixels of the render around them (the rest of the
+        picture's pipeline reaches that far), at the scale and position of the whole picture.
+        The rendered window has the same size wherever the box lies (shifted inward at the
+        picture's edges), so that the fused kernels compile once."""
+        if self.enlargement == 1.0:
+            rows, columns = None, None
+            (r0, r1), (c0, c1) = (top, top + height), (left, left + width)
+        else:
+            rows, (r0, r1) = _weights_and_span(self.rows, top, height)
+            columns, (c0, c1) = _weights_and_span(self.columns, left, width)
+        y0, y1 = _window(r0, r1, self._span(height), context, self.source.shape[-2])
+        x0, x1 = _window(c0, c1, self._span(width), context, self.source.shape[-1])
+        output = self.effect(
+            self.source[..., y0:y1, x0:x1], params, scale=self.scale, origin=(y0, x0), medium=self.medium
+        )[..., r0 - y0 : r1 - y0, c0 - x0 : c1 - x0]
+        if rows is None or columns is None:
+            return output
+        return rows @ output @ columns.T
+
+    def _span(self, count: int) -> int:
+        """The most source pixels that ``count`` pixels of the picture read (the reduction's
+        filter reaches one enlargement beyond each side)."""
+        if self.enlargement == 1.0:
+            return count
+        return math.ceil((count + 2) * self.enlargement) + 2
+
+
+def _window(first: int, end: int, span: int, context: int, length: int) -> tuple[int, int]:
+    """``[start, start + span + 2 context)`` within ``[0, length)`` around ``[first, end)``."""
+    size = min(length, span + 2 * context)
+    start = min(max(0, first - context - (span - (end - first)) // 2), length - size)
+    return start, start + size
+
+
+def _weights_and_span(weights: torch.Tensor, first: int, count: int) -> tuple[torch.Tensor, tuple[int, int]]:
+    """The reduction's rows ``[first, first + count)`` restricted to the source pixels they read,
+    and that span ``[start, end)``."""
+    rows = weights[first : first + count]
+    read = rows.abs().sum(dim=0).nonzero().flatten()
+    start, end = int(read[0]), int(read[-1]) + 1
+    return rows[:, start:end], (start, end)
 
 
 @torch.no_grad()

@@ -99,12 +99,14 @@ def test_predict_refines_from_the_prediction_within_its_budget(files: dict[str, 
     timed = time.perf_counter()
     render(cartoon, content, cartoon.default_params()[None])
     one_render = time.perf_counter() - timed
-    assert 1 <= refinement["answers"] <= 4
-    renders = 1 + refinement["answers"]
+    assert "network" in refinement["answers"] and 2 <= len(refinement["answers"]) <= 5
+    assert refinement["answer"] in refinement["answers"] and refinement["why"]
+    renders = len(refinement["answers"])  # the network's and one per distinct answer
     assert elapsed < refinement["seconds"] + 1.5 * renders * one_render + 1.5, "prediction, renders and files"
     # the result is the better of the two
     assert scores["ssim"] == max(refinement["ssim"], network["ssim"])
-    assert refinement["kept"] == (refinement["ssim"] >= network["ssim"])
+    assert refinement["kept"] == (refinement["answer"] != "network")
+    assert refinement["ssim"] == pytest.approx(max(refinement["answers"].values()), abs=1e-4)
     for name in ("params.safetensors", "result.png", "metrics.json", "predicted.safetensors"):
         assert (root / "refined" / name).is_file()
 
@@ -137,7 +139,8 @@ def test_predict_refinement_can_be_capped_in_iterations(files: dict[str, Path]) 
     root = files["root"]
     code, _ = run_in_process(
         ["predict", "cartoon", "--content", str(root / "photo.png"), "--target", str(root / "example.png"),
-         "-o", str(root / "capped"), "--model", str(root / "cartoon-model.safetensors"), "--refine", "6"]
+         "-o", str(root / "capped"), "--model", str(root / "cartoon-model.safetensors"), "--refine", "6",
+         "--budget", "60"]
     )  # fmt: skip
     assert code == 0
     scores = json.loads((root / "capped" / "metrics.json").read_text())
@@ -166,6 +169,19 @@ def test_bench_ppn_reports_means_and_trials(files: dict[str, Path]) -> None:
     for row in result["trials"]:
         moved = {name for name in row["read_params"] if row["read_params"][name] != row["predicted_params"][name]}
         assert moved <= {"bins", "softness", "contour", "blackness"}
+    # the second set: the presets in turn, one to three parameters moved far from each
+    assert "examples made from presets" in printed
+    presets = result["presets"]
+    assert presets["examples"] == "presets" and presets["trials_finished"] == 3
+    cartoon = wise.effects.create("cartoon")
+    assert [row["preset"] for row in presets["trials"]] == list(cartoon.presets)[:3]
+    for row in presets["trials"]:
+        assert 1 <= len(row["moved"]) <= 3
+        preset = cartoon.params_to_dict(cartoon.preset(row["preset"]))
+        for name, value in row["moved"].items():
+            spec = cartoon.spec(name)
+            assert abs(value - preset[name]) >= 0.34 * (spec.max - spec.min), (name, value, preset[name])
+    assert presets["worst_ssim"] == min(row["ssim"] for row in presets["trials"])
 
 
 def test_bench_ppn_measures_the_refined_prediction_too(files: dict[str, Path]) -> None:
@@ -173,7 +189,7 @@ def test_bench_ppn_measures_the_refined_prediction_too(files: dict[str, Path]) -
     code, printed = run_in_process(
         ["bench", "ppn", "cartoon", "--images", str(root / "photos"),
          "--model", str(root / "cartoon-model.safetensors"), "--trials", "2", "--size", "64",
-         "--refine", "1", "--json", str(root / "refined.json")]
+         "--refine", "1", "--examples", "presets", "--json", str(root / "refined.json")]
     )  # fmt: skip
     assert code == 0 and "refined: mean SSIM" in printed
     result = json.loads((root / "refined.json").read_text())

@@ -61,7 +61,7 @@ def test_an_exact_recovery_counts_as_the_psnr_cap(tmp_path: Path, astronaut: tor
     photos.mkdir()
     write_image(F.interpolate(astronaut, size=(32, 32), mode="area"), photos / "a.png")
 
-    def same_as_default(effect, content, generator):
+    def same_as_default(effect, content, generator, **options):
         truth = effect.default_params()[None]
         return truth, effect(content, truth)
 
@@ -82,7 +82,9 @@ def test_of_several_starts_the_trial_keeps_the_one_that_ends_closest(off_the_sta
     from wise.optimize import benchmark
 
     case = off_the_staircase
-    monkeypatch.setattr(benchmark, "random_reference", lambda effect, content, generator: (case.truth, case.target))
+    monkeypatch.setattr(
+        benchmark, "random_reference", lambda effect, content, generator, **options: (case.truth, case.target)
+    )
     monkeypatch.setattr(benchmark, "inversion_between_levels", lambda *args: None)  # no reading in between
     bins = case.cartoon.param_names.index("bins")
     for starts in ([case.wrong, case.truth], [case.truth, case.wrong]):
@@ -98,7 +100,9 @@ def test_a_start_that_descent_strays_from_is_the_answer(off_the_staircase, monke
     from wise.optimize.parametric import Outcome
 
     case = off_the_staircase
-    monkeypatch.setattr(benchmark, "random_reference", lambda effect, content, generator: (case.truth, case.target))
+    monkeypatch.setattr(
+        benchmark, "random_reference", lambda effect, content, generator, **options: (case.truth, case.target)
+    )
     monkeypatch.setattr(benchmark, "read_starts", lambda *args: ([case.truth], ()))
     strayed = Outcome(params=case.wrong.clone(), result=case.cartoon(case.content, case.wrong).detach())
     monkeypatch.setattr(benchmark, "_descend", lambda *args: strayed)

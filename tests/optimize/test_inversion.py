@@ -245,9 +245,9 @@ def test_several_readings_are_judged_at_the_examples_size(
     judged = []
     closest = inversion.closest
 
-    def recording(effect, content, target, candidates, loss="l2"):
+    def recording(effect, content, target, candidates, loss="l2", **options):
         judged.append((content.shape[-1], len(candidates)))
-        return closest(effect, content, target, candidates, loss)
+        return closest(effect, content, target, candidates, loss, **options)
 
     monkeypatch.setattr(inversion, "closest", recording)
     read_steps(xdog, content, example, xdog.default_params().reshape(1, -1), side=64)

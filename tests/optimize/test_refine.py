@@ -12,6 +12,7 @@ from wise.errors import WiseError
 from wise.optimize.parametric import Outcome
 from wise.optimize.refine import GLOBAL_LEVELS, _levels, answers, refine
 from wise.optimize.trials import content_at
+from wise.render import render
 
 
 @pytest.fixture(scope="module")
@@ -22,17 +23,14 @@ def photo() -> torch.Tensor:
 def test_refinement_moves_a_distant_start_towards_the_example_within_its_budget(photo: torch.Tensor) -> None:
     effect = wise.effects.create("xdog")
     truth = effect.preset("lines")
-    with torch.no_grad():
-        example = effect(photo, truth)
+    example = render(effect, photo, truth[None])  # as `wise apply` draws it, the look refine fits
     start = effect.default_params()
-    with torch.no_grad():
-        before = metrics.ssim(effect(photo, start), example)
+    before = metrics.ssim(render(effect, photo, start[None]), example)
     outcome = refine(effect, photo, example, start, budget=5.0)
-    with torch.no_grad():
-        after = metrics.ssim(effect(photo, outcome.params), example)
-        # the losses per iteration are of the smoothed look at first, so the renders are compared,
-        # by the refinement's loss for global parameters (L1)
-        distances = [float((effect(photo, p) - example).abs().mean()) for p in (start[None], outcome.params)]
+    after = metrics.ssim(render(effect, photo, outcome.params), example)
+    # the losses per iteration are of the smoothed look at first, so the renders are compared,
+    # by the refinement's loss for global parameters (L1)
+    distances = [float((render(effect, photo, p) - example).abs().mean()) for p in (start[None], outcome.params)]
     assert outcome.seconds <= 5.0 + 0.3 and len(outcome.losses) > 20
     assert after > before + 0.03, (before, after)
     assert distances[1] < 0.5 * distances[0], distances
@@ -127,7 +125,8 @@ def test_a_count_descent_cannot_reach_is_read_after_it_and_judged_beside_it(
     assert outcome.settled, "the count is read again after descent"
     assert effect.params_to_dict(outcome.settled[0][0])["bins"] == pytest.approx(5.0, abs=0.25)
     listed = answers(outcome)
-    assert listed[0] is outcome.params and any(answer is outcome.settled[0] for answer in listed)
+    assert listed[0] == ("descent", outcome.params)
+    assert any(name == "read after descent" and answer is outcome.settled[0] for name, answer in listed)
     oilpaint = wise.effects.create("oilpaint")
     outcome = refine(oilpaint, photo, photo, oilpaint.default_params()[None], budget=30.0, max_iterations=2)
     assert outcome.settled == ()  # no steps to read after descent
@@ -138,15 +137,17 @@ def test_the_answers_list_each_candidate_once_in_order() -> None:
     outcome = Outcome(params=descended, settled=(reading.clone(), descended.clone(), other), read=reading.clone())
     listed = answers(outcome)
     assert len(listed) == 3, "a reading equal to an earlier answer is not judged again"
-    assert listed[0] is descended and torch.equal(listed[1], reading) and listed[2] is other
+    assert [name for name, _ in listed] == ["read", "descent", "read after descent"], "simplest first"
+    assert torch.equal(listed[0][1], reading) and listed[1][1] is descended and listed[2][1] is other
 
 
-def test_global_refinement_descends_on_crops_of_a_large_copy_and_whole_small_ones() -> None:
+def test_global_refinement_descends_on_crops_of_a_large_copy_and_of_a_small_one_drawn_enlarged() -> None:
     large, small = torch.zeros(1, 3, 768, 1024), torch.zeros(1, 3, 200, 300)
     (level,) = _levels(large, "global")
     assert level.side == 512 and level.crop == GLOBAL_LEVELS[0].crop
+    # a small photo is drawn at the reference size, as `wise apply` draws it: crops of that render
     (level,) = _levels(small, "global")
-    assert level.side == 200 and level.crop is None and level.share == 1.0
+    assert level.side == 200 and level.crop == GLOBAL_LEVELS[0].crop and level.share == 1.0
     assert all(level.crop is None for level in _levels(large, "local"))
     assert [level.side for level in _levels(small, "local")] == [200]
 
@@ -155,7 +156,7 @@ def test_local_refinement_paints_masks_on_whole_copies(photo: torch.Tensor) -> N
     effect = wise.effects.create("xdog")
     with torch.no_grad():
         example = effect(photo, effect.preset("lines")[None])
-    outcome = refine(effect, photo, example, effect.default_params()[None], budget=5.0, mode="local", max_iterations=4)
+    outcome = refine(effect, photo, example, effect.default_params()[None], budget=30.0, mode="local", max_iterations=4)
     assert outcome.params.shape == (1, len(effect.param_names), *photo.shape[-2:])
     assert len(outcome.losses) == 4 and outcome.result is not None
 
@@ -174,13 +175,13 @@ def test_a_slow_reading_leaves_the_colour_fit_out_and_descent_its_time(
     fitted: list[bool] = []
 
     def reading(delay: float):
-        def read(effect, content, target, given, side):  # noqa: ANN001, ANN202 (read_steps' signature)
+        def read(effect, content, target, given, side, **options):  # noqa: ANN001, ANN003, ANN202 (read_steps')
             time.sleep(delay)
             return given, ()
 
         return read
 
-    def fit(effect, content, target, params, side, deadline):  # noqa: ANN001, ANN202 (fit_quickly's signature)
+    def fit(effect, content, target, params, side, deadline, **options):  # noqa: ANN001, ANN003, ANN202 (fit_quickly's)
         fitted.append(True)
         return params
 

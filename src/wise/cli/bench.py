@@ -60,7 +60,7 @@ def run_ppn(args: argparse.Namespace, out: TextIO) -> int:
     output_file(args.json, {**inputs, "--model": args.model}, (".json",))
     result = bench_ppn(
         args.effect, args.images, args.model, args.trials, args.size, args.seed, args.json, device(args.device), out,
-        refine_budget=args.refine,
+        refine_budget=args.refine, examples=args.examples,
     )  # fmt: skip
     return exit_code(result["interrupted"])
 
@@ -179,6 +179,13 @@ def register(commands: argparse._SubParsersAction) -> None:
         type=types.positive_seconds,
         metavar="SECONDS",
         help=f"also refine each prediction for SECONDS as 'wise predict' does (its default: {DEFAULT_BUDGET:g})",
+    )
+    ppn_parser.add_argument(
+        "--examples",
+        choices=("random", "presets", "both"),
+        default="both",
+        help="examples with random parameters, made from the presets with one to three parameters moved "
+        "far (as users make them), or both (default)",
     )
     add_device(ppn_parser)
     add_pixel_limit(ppn_parser)

@@ -80,7 +80,7 @@ def _trial(
     """One trial: random parameters, their reference, and the optimization's outcome: from each
     start that the reading leaves (:func:`wise.optimize.inversion.read_starts`), the one that ends
     closest, its time that of all starts."""
-    truth, reference = random_reference(effect, content, generator)
+    truth, reference = random_reference(effect, content, generator, at_reference=False)
     start = effect.default_params() if predictor is None else predictor(content, reference)
     began = time.perf_counter()
     starts, held = read_starts(effect, content, reference, start.reshape(1, -1))

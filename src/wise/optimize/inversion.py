@@ -937,6 +937,7 @@ def read_steps(
     params: torch.Tensor,
     side: int = WORKING_SIDE,
     search: bool = False,
+    at_reference: bool = False,
 ) -> tuple[torch.Tensor, tuple[str, ...]]:
     """``params`` (normalized ``(1, P)``) with the step-like parameters of ``effect`` read off
     ``example``, the effect's rendering of ``content`` (both ``(1, 3, H, W)``, same size); the
@@ -946,7 +947,9 @@ def read_steps(
     parameters and, where the example showed them clearly, the staircase parameters
     (:data:`HELD_PARAMS`) that descent should hold (:attr:`wise.optimize.parametric.Settings.held`).
     With ``search``, an estimate the example leaves open is settled by a short discrete search:
-    each candidate descended briefly at :data:`SEARCH_SIDE` pixels, the best kept (seconds)."""
+    each candidate descended briefly at :data:`SEARCH_SIDE` pixels, the best kept (seconds).
+    ``at_reference``: the example is drawn as ``wise apply`` draws it (a small picture enlarged),
+    and the renders that judge are drawn so (:class:`wise.render.Look`)."""
     estimate = _ESTIMATES.get(getattr(effect, "name", ""))  # a wrapped effect (a test's) has none
     if estimate is None:
         return params, ()
@@ -962,7 +965,9 @@ def read_steps(
             # look (lines and steps at another scale) that can favour the wrong one
             judged_content = _working_copy(full_content, max(side, JUDGE_SIDE))
             judged_example = _working_copy(full_example, max(side, JUDGE_SIDE)).to(judged_content)
-            found = closest(effect, judged_content, judged_example, [given, found, *reading.alternatives])
+            found = closest(
+                effect, judged_content, judged_example, [given, found, *reading.alternatives], at_reference=at_reference
+            )
         elif not reading.clear:  # an estimate that the example leaves open must fit better than what was there
             found = closest(effect, content, example, [given, found])
     if not reading.clear and search and len(reading.candidates) > 1:
@@ -977,6 +982,7 @@ def read_starts(
     example: torch.Tensor,
     params: torch.Tensor,
     side: int = WORKING_SIDE,
+    at_reference: bool = False,
 ) -> tuple[list[torch.Tensor], tuple[str, ...]]:
     """The starts of a multi-start descent and the parameters it holds: :func:`read_steps` with
     ``search``, and where the effect has a fit of the parameters the steps make smooth (cartoon:
@@ -985,7 +991,7 @@ def read_starts(
     mislead descent; fitted to nearly right ones, they lead it to the example (BENCHMARKS.md, "Two
     starts where the count is unclear", "Two starts where the steps are clear"): only a descent
     from both tells which."""
-    found, held = read_steps(effect, content, example, params, side, search=True)
+    found, held = read_steps(effect, content, example, params, side, search=True, at_reference=at_reference)
     fit = _COLOUR_FITS.get(getattr(effect, "name", ""))
     if fit is None:
         return [found], held
@@ -1029,6 +1035,7 @@ def fit_quickly(
     params: torch.Tensor,
     side: int = WORKING_SIDE,
     deadline: float | None = None,
+    at_reference: bool = False,
 ) -> torch.Tensor:
     """``params`` (normalized ``(1, P)``) with the parameters that the steps read make smooth fitted
     within about a second, where a refinement of seconds has no time for :func:`read_starts`'
@@ -1036,7 +1043,7 @@ def fit_quickly(
     read again at them, on copies whose short side is ``side``); kept where its render at up to
     :data:`JUDGE_SIDE` pixels fits ``example`` better. Unchanged for effects without such a fit.
     With ``deadline`` (a :func:`time.perf_counter` value) the fit stops there with what it has,
-    which is then judged as before."""
+    which is then judged as before; ``at_reference`` as for :func:`read_steps`."""
     fit = _QUICK_FITS.get(getattr(effect, "name", ""))
     if fit is None:
         return params
@@ -1048,7 +1055,13 @@ def fit_quickly(
         return params
     judged_content = _working_copy(content.detach(), max(side, JUDGE_SIDE))
     judged_example = _working_copy(example.detach(), max(side, JUDGE_SIDE)).to(judged_content)
-    best = closest(effect, judged_content, judged_example, [given.to(judged_content), fitted.to(judged_content)])
+    best = closest(
+        effect,
+        judged_content,
+        judged_example,
+        [given.to(judged_content), fitted.to(judged_content)],
+        at_reference=at_reference,
+    )
     return best.to(device=params.device, dtype=params.dtype).reshape(params.shape)
 
 

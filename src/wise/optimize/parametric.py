@@ -29,6 +29,7 @@ from wise.filters.smoothing import annealed_temperature, smoothed_steps, softene
 from wise.optimize.adam import Adam
 from wise.optimize.settings import PYRAMIDS, Settings
 from wise.params import NORMALIZED_MAX, NORMALIZED_MIN, check_params, clamp_masks, resize_masks
+from wise.render import Look
 from wise.vgg import StyleLoss, load_vgg19
 
 LAB_WEIGHT = 0.5
@@ -105,14 +106,21 @@ def _image_loss(kind: str, content: torch.Tensor, target: torch.Tensor, vgg_weig
 
 
 def closest(
-    effect: Effect, content: torch.Tensor, target: torch.Tensor, candidates: Sequence[torch.Tensor], loss: str = "l2"
+    effect: Effect,
+    content: torch.Tensor,
+    target: torch.Tensor,
+    candidates: Sequence[torch.Tensor],
+    loss: str = "l2",
+    at_reference: bool = False,
 ) -> torch.Tensor:
     """The candidate parameters whose render of ``content`` is closest to ``target`` by ``loss``
-    (:func:`image_distance`, the first of equals); a single candidate is returned without rendering."""
+    (:func:`image_distance`, the first of equals); a single candidate is returned without rendering.
+    ``at_reference``: rendered as :class:`wise.render.Look` draws the picture (default: at its own scale)."""
     if len(candidates) == 1:
         return candidates[0]
+    look = Look(effect, content, at_reference)
     with torch.no_grad():
-        losses = [float(image_distance(loss, effect(content, c).clamp(0.0, 1.0), target)) for c in candidates]
+        losses = [float(image_distance(loss, look(c).clamp(0.0, 1.0), target)) for c in candidates]
     return candidates[losses.index(min(losses))]
 
 
@@ -177,11 +185,11 @@ def _progress(settings: Settings, iteration: int, start: float) -> float:
     return max(done, (time.perf_counter() - start) / settings.time_limit)
 
 
-def _finished(outcome: Outcome, effect: Effect, content: torch.Tensor, start: float) -> Outcome:
+def _finished(outcome: Outcome, look: Look, start: float) -> Outcome:
     """The outcome with its wall time and the effect's output for the parameters reached."""
     outcome.seconds = time.perf_counter() - start
     with torch.no_grad():
-        outcome.result = effect(content, outcome.params)
+        outcome.result = look(outcome.params)
     return outcome
 
 
@@ -206,6 +214,7 @@ def optimize(
     if content.shape != target.shape:
         raise WiseError(f"content {tuple(content.shape)} and target {tuple(target.shape)} differ in size")
     image_loss = _image_loss(settings.loss, content, target, settings.vgg_weights)
+    look = Look(effect, content, settings.at_reference)
     params = initial_params(effect, init.to(content), settings.mode, tuple(content.shape[-2:])).requires_grad_()
     optimizer = Adam([params], lr=settings.lr)
     outcome = Outcome(params=params.detach())
@@ -223,7 +232,7 @@ def optimize(
                 smoothed_steps(temperature),
                 softened_gradients(settings.soft_gradients),
             ):
-                output = effect(content, params)
+                output = look(params)
             renders.append(time.perf_counter() - began)
             loss = image_loss(output)
             if settings.tv_weight > 0 and params.dim() == 4:
@@ -249,7 +258,7 @@ def optimize(
                 break
     except KeyboardInterrupt:
         outcome.interrupted = True
-    return _finished(outcome, effect, content, start)
+    return _finished(outcome, look, start)
 
 
 def pyramid(
@@ -309,6 +318,7 @@ def optimize_coarse_to_fine(
         if index > 0 and between_levels is not None and params.dim() == 2:
             params = between_levels(params.detach())
         if reduction > 1:
+            settings = replace(settings, at_reference=False)  # a coarse copy: cheap iterations
             size = (max(8, content.shape[-2] // reduction), max(8, content.shape[-1] // reduction))
             level_content = torch.nn.functional.interpolate(content, size=size, mode="area")
             level_target = torch.nn.functional.interpolate(target, size=size, mode="area")
@@ -331,7 +341,7 @@ def optimize_coarse_to_fine(
     if outcome.result is not None and outcome.result.shape[-2:] != content.shape[-2:]:
         with torch.no_grad():
             outcome.params = initial_params(effect, outcome.params, mode, tuple(content.shape[-2:]))
-            outcome.result = effect(content, outcome.params)
+            outcome.result = Look(effect, content, levels[-1][1].at_reference)(outcome.params)
     outcome.losses, outcome.seconds = losses, seconds
     return outcome
 
@@ -387,20 +397,23 @@ def optimize_on_crops(
     """Global parameters optimized at the working resolution, one random crop per iteration.
 
     Each iteration renders a ``crop`` x ``crop`` region with ``context`` pixels around it,
-    at the scale and position of the whole image (so textures and filter sizes are those of
-    the full render), and takes an Adam step on the loss over the region. Details finer than
-    a reduced copy can show (brush texture, thin lines) are then fitted where they exist, at
-    a fraction of the cost of full-size iterations. The learning rate decays as in
-    :func:`optimize`; the loss is :func:`image_distance`; ``settings.time_limit``,
-    ``anneal`` and ``held`` act as there. Without ``render`` the outcome has no ``result``
-    (the whole image is not rendered) and the time limit is the iterations' alone.
+    at the scale and position of the whole image as :class:`wise.render.Look` draws it (so
+    textures and filter sizes are those of the full render; both sizes count pixels of that
+    render, of which an enlarged small picture shows fewer of its own), and takes an Adam step
+    on the loss over the region. Details finer than a reduced copy can show (brush texture,
+    thin lines) are then fitted where they exist, at a fraction of the cost of full-size
+    iterations. The learning rate decays as in :func:`optimize`; the loss is
+    :func:`image_distance`; ``settings.time_limit``, ``anneal`` and ``held`` act as there.
+    Without ``render`` the outcome has no ``result`` (the whole image is not rendered) and the
+    time limit is the iterations' alone.
     """
     if settings.mode != "global":
         raise WiseError("optimization on crops fits global parameters only; use mode 'global'")
     _check_crops(settings, content, target)
     height, width = content.shape[-2:]
-    crop = min(crop, height, width)
-    scale = min(height, width) / REFERENCE_SHORT_SIDE
+    look = Look(effect, content, settings.at_reference)
+    # ``crop`` and ``context`` are pixels of the render: of an enlarged picture's, fewer of its own
+    crop = min(round(crop / look.enlargement), height, width)
     generator = generator if generator is not None else torch.Generator().manual_seed(0)
     params = initial_params(effect, init.to(content), "global", (height, width)).requires_grad_()
     optimizer = Adam([params], lr=settings.lr)
@@ -412,15 +425,12 @@ def optimize_on_crops(
         for iteration in range(1, settings.iterations + 1):
             began = time.perf_counter()
             top, left = _random_box((height, width), crop, generator)
-            y0, x0 = max(0, top - context), max(0, left - context)
-            y1, x1 = min(height, top + crop + context), min(width, left + crop + context)
             optimizer.zero_grad(set_to_none=True)
             temperature = annealed_temperature(settings.anneal, _progress(settings, iteration, start))
             with smoothed_steps(temperature), softened_gradients(settings.soft_gradients):
-                output = effect(content[..., y0:y1, x0:x1], params, scale=scale, origin=(y0, x0))
+                region = look.box(params, top, left, crop, crop, context)
             rendered = time.perf_counter() - began
-            renders.append(rendered * height * width / ((y1 - y0) * (x1 - x0)) if render else 0.0)
-            region = output[..., top - y0 : top - y0 + crop, left - x0 : left - x0 + crop]
+            renders.append(rendered * height * width / (crop + 2 * context / look.enlargement) ** 2 if render else 0.0)
             loss = image_distance(settings.loss, region, target[..., top : top + crop, left : left + crop])
             loss.backward()
             _hold(params, effect, settings.held)
@@ -438,7 +448,7 @@ def optimize_on_crops(
     if not render:
         outcome.seconds = time.perf_counter() - start
         return outcome
-    return _finished(outcome, effect, content, start)
+    return _finished(outcome, look, start)
 
 
 def optimize_masks_on_crops(

@@ -1,8 +1,10 @@
 """The parameter prediction benchmark of the WISE supplement (``wise bench ppn``).
 
-Seeded random global parameters render an example from a photo (redrawn while the example is
-nearly blank, as in :mod:`wise.optimize.benchmark`); the model predicts the parameters from
-photo and example; the effect re-renders the photo with them. Scores: SSIM and PSNR of the
+Two sets of examples: seeded random global parameters render an example from a photo (redrawn
+while the example is nearly blank, as in :mod:`wise.optimize.benchmark`), and examples as users
+make them, the effect's presets in turn with one to three parameters moved far
+(:func:`~wise.optimize.trials.preset_reference`). The model predicts the parameters from photo
+and example; the effect re-renders the photo with them, as ``wise apply`` renders. Scores: SSIM and PSNR of the
 re-rendering against the example, and the mean absolute error of the normalized parameters.
 With a refinement budget, each trial also refines the prediction as ``wise predict`` does
 (:func:`wise.optimize.refine.refine`) and scores the refined parameters and the whole time.
@@ -10,6 +12,7 @@ With a refinement budget, each trial also refines the prediction as ``wise predi
 
 from __future__ import annotations
 
+import json
 import sys
 import time
 from pathlib import Path
@@ -18,18 +21,15 @@ from typing import TextIO
 import torch
 
 from wise import effects, metrics
+from wise.io import atomic_path
 from wise.optimize.inversion import invert_steps, invertible
-from wise.optimize.parametric import Outcome
 from wise.optimize.refine import answers, refine
-from wise.optimize.trials import PSNR_CAP, Column, mean_of, random_reference, run_trials
+from wise.optimize.trials import PSNR_CAP, Column, mean_of, preset_reference, random_reference, run_trials, worst_of
 from wise.ppn.predictor import Predictor
+from wise.render import render
 
-
-def _answer_kind(outcome: Outcome, final: torch.Tensor) -> str:
-    """Which of the refinement's answers ``final`` is: ``descent``, ``after descent`` or ``read``."""
-    if final is outcome.params:
-        return "descent"
-    return "after descent" if any(final is answer for answer in outcome.settled) else "read"
+EXAMPLES = ("random", "presets", "both")
+"""The sets of examples ``bench_ppn`` can run."""
 
 
 def bench_ppn(
@@ -43,24 +43,34 @@ def bench_ppn(
     device: torch.device | str = "cpu",
     out: TextIO = sys.stdout,
     refine_budget: float | None = None,
+    examples: str = "both",
 ) -> dict:
-    """Run the benchmark; prints a table, returns (and optionally writes) the results. Ctrl-C
-    ends it after the trial in progress; the finished trials are written with ``"interrupted": true``."""
+    """Run the benchmark on the ``examples`` set (:data:`EXAMPLES`); prints a table per set,
+    returns (and optionally writes) the results: the random set's summary with the presets'
+    under ``presets`` (or the one set run). Ctrl-C ends it after the trial in progress; the
+    finished trials are written with ``"interrupted": true``."""
+    if examples not in EXAMPLES:
+        raise ValueError(f"examples must be one of {EXAMPLES}, got {examples!r}")
     effect = effects.create(effect_name)
     predictor = Predictor(model, effect_name, device)
+    made_from_presets = False
 
     def score(content: torch.Tensor, example: torch.Tensor, params: torch.Tensor) -> tuple[float, float]:
-        with torch.no_grad():
-            rendered = effect(content, params).clamp(0.0, 1.0)
+        rendered = render(effect, content, params).clamp(0.0, 1.0)
         return metrics.ssim(rendered, example), min(PSNR_CAP, metrics.psnr(rendered, example))
 
     def trial(number: int, path: Path, content: torch.Tensor, generator: torch.Generator) -> dict:
-        truth, example = random_reference(effect, content, generator)
+        made: dict = {}
+        if made_from_presets:
+            truth, example, made = preset_reference(effect, content, generator, number)
+        else:
+            truth, example = random_reference(effect, content, generator)
         began = time.perf_counter()
         predicted = predictor(content, example)
         seconds = time.perf_counter() - began
         ssim, psnr = score(content, example, predicted)
         row = {
+            **made,
             "ssim": ssim,
             "psnr": psnr,
             "param_l1": float((predicted - truth).abs().mean()),
@@ -78,19 +88,20 @@ def bench_ppn(
             outcome = refine(effect, content, example, predicted, refine_budget)
             if outcome.interrupted:
                 raise KeyboardInterrupt
-            scored = [(answer, *score(content, example, answer)) for answer in answers(outcome)]
-            final, refined_ssim, refined_psnr = max(scored, key=lambda s: s[1])  # as wise predict
-            kept = refined_ssim >= ssim
+            # as wise predict: the best of the network alone and the refinement's answers
+            judged = [("network", predicted, ssim, psnr)]
+            judged += [(name, answer, *score(content, example, answer)) for name, answer in answers(outcome)]
+            name, final, refined_ssim, refined_psnr = max(judged, key=lambda entry: entry[2])
             row["refined"] = {
-                "ssim": refined_ssim if kept else ssim,
-                "psnr": refined_psnr if kept else psnr,
-                "param_l1": float(((final if kept else predicted) - truth).abs().mean()),
-                "kept": kept,
+                "ssim": refined_ssim,
+                "psnr": refined_psnr,
+                "param_l1": float((final - truth).abs().mean()),
+                "kept": name != "network",
                 "iterations": len(outcome.losses),
                 "seconds": round(seconds + outcome.seconds, 2),
-                "params": effect.params_to_dict((final if kept else predicted)[0]),
-                "descent_kept": final is outcome.params,
-                "answer": _answer_kind(outcome, final),
+                "params": effect.params_to_dict(final[0]),
+                "descent_kept": name == "descent",
+                "answer": name,
             }
             row.update({f"refined_{key}": row["refined"][key] for key in ("ssim", "psnr", "seconds")})
         return row
@@ -98,6 +109,7 @@ def bench_ppn(
     def summarize(rows: list[dict], interrupted: bool) -> dict:
         summary = {
             "effect": effect_name,
+            "examples": "presets" if made_from_presets else "random",
             "model": predictor.info.source,
             "architecture": predictor.info.architecture,
             "working_size": predictor.info.size,
@@ -105,6 +117,7 @@ def bench_ppn(
             "seed": seed,
             "trials_finished": len(rows),
             "mean_ssim": mean_of(rows, "ssim"),
+            "worst_ssim": worst_of(rows, "ssim"),
             "mean_psnr": mean_of(rows, "psnr"),
             "mean_param_l1": mean_of(rows, "param_l1"),
             "seconds_per_prediction": mean_of(rows, "seconds"),
@@ -121,12 +134,14 @@ def bench_ppn(
         if refine_budget is not None:
             summary["refined"] = {
                 "mean_ssim": mean_of(rows, "refined_ssim"),
+                "worst_ssim": worst_of(rows, "refined_ssim"),
                 "mean_psnr": mean_of(rows, "refined_psnr"),
                 "mean_seconds": mean_of(rows, "refined_seconds"),
             }
         if rows:
             print(
-                f"mean SSIM {summary['mean_ssim']:.4f}, mean PSNR {summary['mean_psnr']:.2f} dB, "
+                f"mean SSIM {summary['mean_ssim']:.4f} (worst {summary['worst_ssim']:.4f}), "
+                f"mean PSNR {summary['mean_psnr']:.2f} dB, "
                 f"mean parameter L1 {summary['mean_param_l1']:.4f}, "
                 f"{summary['seconds_per_prediction']:.3f} s per prediction",
                 file=out,
@@ -141,7 +156,8 @@ def bench_ppn(
             if refine_budget is not None:
                 refined = summary["refined"]
                 print(
-                    f"refined: mean SSIM {refined['mean_ssim']:.4f}, mean PSNR {refined['mean_psnr']:.2f} dB, "
+                    f"refined: mean SSIM {refined['mean_ssim']:.4f} (worst {refined['worst_ssim']:.4f}), "
+                    f"mean PSNR {refined['mean_psnr']:.2f} dB, "
                     f"{refined['mean_seconds']:.1f} s per trial",
                     file=out,
                 )
@@ -152,4 +168,23 @@ def bench_ppn(
         columns += [Column("read SSIM", "read_ssim"), Column("read param L1", "read_param_l1")]
     if refine_budget is not None:
         columns += [Column("refined SSIM", "refined_ssim"), Column("refined PSNR", "refined_psnr", ".2f")]
-    return run_trials(images_dir, trials, size, seed, trial, columns, summarize, json_path, out)
+    result: dict | None = None
+    if examples in ("random", "both"):
+        print("examples with random parameters:", file=out, flush=True)
+        result = run_trials(images_dir, trials, size, seed, trial, columns, summarize, None, out)
+    if examples in ("presets", "both") and not (result is not None and result["interrupted"]):
+        made_from_presets = True
+        print("examples made from presets, one to three parameters moved far:", file=out, flush=True)
+        presets = run_trials(
+            images_dir, trials, size, seed, trial, [Column("preset", "preset", "s"), *columns], summarize, None, out
+        )
+        if result is None:
+            result = presets
+        else:
+            result["presets"] = presets
+            result["interrupted"] = presets["interrupted"]
+    assert result is not None
+    if json_path is not None:
+        with atomic_path(json_path) as tmp:
+            Path(tmp).write_text(json.dumps(result, indent=2) + "\n")
+    return result

@@ -20,6 +20,7 @@ import torch.nn.functional as F
 
 from wise.effects.base import Effect
 from wise.errors import WiseError
+from wise.filters._checks import REFERENCE_SHORT_SIDE
 from wise.optimize.inversion import (
     HELD_PARAMS,
     fit_quickly,
@@ -38,7 +39,9 @@ class Level:
     ``side`` (the photo's own where that is smaller) for ``share`` of the budget, at ``rate``
     times :data:`REFINE_LR`; with ``crop``, on one random square of that many pixels per
     iteration, rendered at the copy's scale and position
-    (:func:`~wise.optimize.parametric.optimize_on_crops`; global parameters only)."""
+    (:func:`~wise.optimize.parametric.optimize_on_crops`; global parameters only). The photo's
+    own size is drawn as ``wise apply`` draws it (:class:`wise.render.Look`: a photo below the
+    reference enlarged and the render reduced), a reduced copy at its own scale."""
 
     side: int
     share: float
@@ -103,24 +106,28 @@ RENDER_SHARE = 1.5
 starts only when that much of the budget is left (estimated from the level before, per pixel)."""
 
 
-def answers(outcome: Outcome) -> list[torch.Tensor]:
-    """The refinement's candidate answers: where descent ended, the readings from there after it
-    (:attr:`~wise.optimize.parametric.Outcome.settled`), and the steps read off the target before
-    descent where the reading changed the start. Descent on the image loss can stray from a
-    reading that was right, and a reading can be wrong where descent was right, so callers keep
-    the one that re-creates the target best (ties to the first). Each answer is listed once, so
-    that none is rendered twice."""
-    candidates = [outcome.params, *outcome.settled] + ([] if outcome.read is None else [outcome.read])
-    distinct: list[torch.Tensor] = []
-    for candidate in candidates:
-        if not any(candidate.shape == seen.shape and torch.equal(candidate, seen) for seen in distinct):
-            distinct.append(candidate)
+def answers(outcome: Outcome) -> list[tuple[str, torch.Tensor]]:
+    """The refinement's candidate answers, named, simplest first: the steps read off the target
+    before descent (``read``, where the reading changed the start), where descent ended
+    (``descent``), and the readings from there after it (``read after descent``, then ``... 2``
+    and on, :attr:`~wise.optimize.parametric.Outcome.settled`). Descent on the image loss can stray from
+    a reading that was right, and a reading can be wrong where descent was right, so callers keep
+    the one that re-creates the target best, the network's own prediction among them (ties to
+    the simpler). Each answer is listed once, so that none is rendered twice."""
+    candidates = ([] if outcome.read is None else [("read", outcome.read)]) + [("descent", outcome.params)]
+    candidates += [("read after descent", settled) for settled in outcome.settled]
+    distinct: list[tuple[str, torch.Tensor]] = []
+    for name, candidate in candidates:
+        if not any(candidate.shape == seen.shape and torch.equal(candidate, seen) for _, seen in distinct):
+            count = sum(seen_name.startswith(name) for seen_name, _ in distinct)
+            distinct.append((name if count == 0 else f"{name} {count + 1}", candidate))
     return distinct
 
 
 def _levels(content: torch.Tensor, mode: str) -> list[Level]:
     """The mode's levels that are smaller than the photo, then the photo's own size with the
-    share of those that are not; crops only on copies large enough for them."""
+    share of those that are not; crops only on copies whose render is large enough for them
+    (the photo's own is at least the reference's, :class:`wise.render.Look`)."""
     short = min(content.shape[-2:])
     plan = GLOBAL_LEVELS if mode == "global" else LOCAL_LEVELS
     levels = [level for level in plan if level.side < short]
@@ -129,7 +136,9 @@ def _levels(content: torch.Tensor, mode: str) -> list[Level]:
         levels.append(replace(plan[len(levels)], side=short, share=spare))
     return [
         level
-        if level.crop is None or CROP_MARGIN * (level.crop + 2 * CROP_CONTEXT) <= level.side
+        if level.crop is None
+        or CROP_MARGIN * (level.crop + 2 * CROP_CONTEXT)
+        <= (max(level.side, REFERENCE_SHORT_SIDE) if level.side == short else level.side)
         else replace(level, crop=None)
         for level in levels
     ]
@@ -157,7 +166,7 @@ def refine(
     outcome of the last level (its ``result`` at that level's size, none after crops; render the
     parameters at the photo's own size with :func:`wise.render.render`), with the steps read off the target
     before descent as its ``read`` where the reading changed the start, and the readings from where
-    descent ended as its ``settled`` (:func:`answers` lists them all). ``max_iterations`` caps
+    descent ended as its ``settled`` (:func:`answers` names them all). ``max_iterations`` caps
     the iterations, shared out over the levels (at least one each); ``loss`` defaults to the
     mode's (:data:`REFINE_LOSSES`)."""
     if not budget > 0:
@@ -174,7 +183,7 @@ def refine(
     left_out: list[str] = []
     if reading:
         given = start.reshape(1, -1)
-        params, held = read_steps(effect, content, target, given, side=INVERSION_SIDE)
+        params, held = read_steps(effect, content, target, given, side=INVERSION_SIDE, at_reference=True)
         reading_seconds = time.perf_counter() - began
         if not torch.equal(params, given.to(params)):
             # held even where the example left the count open: in a budget of seconds, descent
@@ -186,7 +195,9 @@ def refine(
         # tone curve that fits but is not the example's trades one for another
         if reading_seconds * (1.0 + FIT_PER_READING) <= READING_SHARE * budget:
             deadline = began + READING_SHARE * budget
-            params = fit_quickly(effect, content, target, params, side=INVERSION_SIDE, deadline=deadline)
+            params = fit_quickly(
+                effect, content, target, params, side=INVERSION_SIDE, deadline=deadline, at_reference=True
+            )
         elif fits_quickly(effect):
             left_out.append("the colour fit")
         read = None if torch.equal(params, start.reshape(params.shape)) else params
@@ -201,7 +212,10 @@ def refine(
     for index, level in enumerate(plan):
         factor = level.side / min(content.shape[-2:])
         size = (max(8, round(content.shape[-2] * factor)), max(8, round(content.shape[-1] * factor)))
-        rendered = size[0] * size[1] if level.crop is None else (level.crop + 2 * CROP_CONTEXT) ** 2
+        # the photo's own size is drawn as the user's render draws it; a reduced copy at its own scale
+        at_reference = factor == 1
+        enlargement = max(1.0, REFERENCE_SHORT_SIDE / min(size)) if at_reference else 1.0
+        rendered = size[0] * size[1] * enlargement**2 if level.crop is None else (level.crop + 2 * CROP_CONTEXT) ** 2
         # the level's share of what is left, so that a level that ends early leaves its time to the next
         left = budget - kept_back - (time.perf_counter() - began)
         if left <= seconds_per_pixel * rendered:  # not even one iteration would fit
@@ -216,6 +230,7 @@ def refine(
             anneal=REFINE_ANNEAL if index == 0 else 0.0,
             held=held,
             final_lr=REFINE_FINAL_LR if level.crop is not None else None,  # whole copies: the paper's decay
+            at_reference=at_reference,
         )
         small_content = F.interpolate(content, size=size, mode="area") if factor < 1 else content
         small_target = F.interpolate(target, size=size, mode="area") if factor < 1 else target

@@ -71,6 +71,12 @@ class Settings:
     the look renders exactly, its steps pass gradients as wider ramps. None: :data:`MASK_SOFT_GRADIENTS`
     for per-pixel masks, 0 for global values."""
 
+    at_reference: bool = False
+    """Render as :func:`wise.render.render` does (:class:`wise.render.Look`): a picture whose short
+    side is below the reference enlarged to it and reduced back, the look the user's render
+    shows; the commands fit that. False: at the picture's own scale, as ``effect(content,
+    params)`` renders (a working copy, where iterations on a small picture cost its own pixels)."""
+
     final_lr: float | None = None
     """The learning rate at the end as a share of ``lr``, reached along a half cosine over the
     progress (iterations or time, as the annealing): the noise of random crops then settles

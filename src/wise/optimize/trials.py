@@ -21,6 +21,7 @@ import torch.nn.functional as F
 from wise.effects.base import Effect
 from wise.interrupt import ctrl_c
 from wise.io import atomic_path, images_in, read_image
+from wise.render import render
 
 PSNR_CAP = 60.0
 """PSNR counted for a recovered image identical to the reference (beyond 8-bit precision)."""
@@ -31,17 +32,55 @@ MAX_DRAWS = 20
 
 
 def random_reference(
-    effect: Effect, content: torch.Tensor, generator: torch.Generator
+    effect: Effect, content: torch.Tensor, generator: torch.Generator, at_reference: bool = True
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Random normalized global parameters (1, P) and the reference they render, redrawn while
-    the reference is nearly blank."""
+    the reference is nearly blank: as ``wise apply`` renders, or with ``at_reference=False`` at
+    the photo's own scale (for a descent that renders so; the same at 512 pixels and above)."""
     for _ in range(MAX_DRAWS):
         truth = torch.rand(1, len(effect.param_specs), generator=generator) - 0.5
-        with torch.no_grad():
-            reference = effect(content, truth)
+        reference = render(effect, content, truth, at_reference=at_reference)
         if float(reference.std()) >= MIN_REFERENCE_CONTRAST:
             break
     return truth, reference
+
+
+MOVED_PARAMS = (1, 3)
+"""Fewest and most parameters of a preset that an example of :func:`preset_reference` moves."""
+MOVED_AT_LEAST = 0.35
+"""How far (normalized, of a range of 1) each moved parameter lands from the preset's value."""
+
+
+def preset_reference(
+    effect: Effect, content: torch.Tensor, generator: torch.Generator, number: int
+) -> tuple[torch.Tensor, torch.Tensor, dict]:
+    """An example as users make them: the effect's presets in turn (trial ``number``), one to
+    three of its parameters moved far from the preset's value (at least :data:`MOVED_AT_LEAST`
+    of their range), rendered as ``wise apply`` renders; redrawn while nearly blank. Returns
+    the normalized parameters (1, P), the example and what was made: the preset and the moved
+    values in real units."""
+    names = list(effect.presets)
+    preset = names[number % len(names)]
+    base = effect.preset(preset)
+    for _ in range(MAX_DRAWS):
+        count = int(torch.randint(MOVED_PARAMS[0], MOVED_PARAMS[1] + 1, (1,), generator=generator))
+        moved = torch.randperm(len(effect.param_specs), generator=generator)[:count].tolist()
+        truth = base.clone()
+        for index in moved:
+            # uniform over the parts of [-0.5, 0.5] at least MOVED_AT_LEAST from the preset's value
+            below = max(0.0, float(base[index]) + 0.5 - MOVED_AT_LEAST)
+            above = max(0.0, 0.5 - float(base[index]) - MOVED_AT_LEAST)
+            draw = float(torch.rand(1, generator=generator)) * (below + above)
+            truth[index] = -0.5 + draw if draw < below else float(base[index]) + MOVED_AT_LEAST + (draw - below)
+        reference = render(effect, content, truth[None])
+        if float(reference.std()) >= MIN_REFERENCE_CONTRAST:
+            break
+    values = effect.params_to_dict(truth)
+    made = {
+        "preset": preset,
+        "moved": {effect.param_specs[index].name: values[effect.param_specs[index].name] for index in sorted(moved)},
+    }
+    return truth[None], reference, made
 
 
 def content_at(photo: torch.Tensor, size: int) -> torch.Tensor:
@@ -108,3 +147,9 @@ def mean_of(rows: list[dict], key: str) -> float | None:
     """The mean of a column over the finished trials (None when none finished or none has it)."""
     values = [row[key] for row in rows if row.get(key) is not None]
     return statistics.fmean(values) if values else None
+
+
+def worst_of(rows: list[dict], key: str) -> float | None:
+    """The lowest value of a column over the finished trials (None when none has it)."""
+    values = [row[key] for row in rows if row.get(key) is not None]
+    return min(values) if values else None
