@@ -4,7 +4,6 @@ reference size, where the picture is drawn enlarged and reduced (:func:`wise.ren
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import pytest
@@ -14,7 +13,7 @@ from skimage import data
 import wise
 from wise.io import read_image, write_image
 from wise.optimize.trials import content_at, random_reference
-from wise.paramfile import load_params, save_params
+from wise.paramfile import save_params
 from wise.render import Look, render
 
 from .helpers import run_in_process
@@ -37,7 +36,9 @@ def _applied(tmp_path: Path, photo: Path, params: Path, name: str) -> torch.Tens
 
 
 @pytest.mark.parametrize("short", [256, 320, 512])
-def test_apply_predict_optimize_and_bench_draw_the_same_picture(tmp_path: Path, short: int) -> None:
+def test_apply_predict_optimize_and_bench_draw_the_same_picture(
+    tmp_path: Path, short: int, brief_readings: None
+) -> None:
     effect = wise.effects.create("xdog")
     content = _photo(short)
     truth = effect.params_from_dict({"contour": 2.0, "details": 1.5, "blackness": 0.3}, preset="portrait")[None]
@@ -60,9 +61,9 @@ def test_apply_predict_optimize_and_bench_draw_the_same_picture(tmp_path: Path, 
 
     target = tmp_path / "example.png"
     write_image(example, target)
-    predicted = tmp_path / "predicted"
+    predicted = tmp_path / "predicted"  # the refinement's descent fits this look: tests/optimize/test_refine.py
     code, _ = run_in_process(
-        ["predict", "xdog", "--content", str(photo), "--target", str(target), "-o", str(predicted), "--refine", "2"]
+        ["predict", "xdog", "--content", str(photo), "--target", str(target), "-o", str(predicted), "--refine", "0"]
     )
     assert code == 0
     answer = _applied(tmp_path, photo, predicted / "params.safetensors", "predicted")
@@ -72,17 +73,12 @@ def test_apply_predict_optimize_and_bench_draw_the_same_picture(tmp_path: Path, 
     code, _ = run_in_process(
         [
             "optimize", "xdog", "--content", str(photo), "--target", str(target), "-o", str(optimized),
-            "--mode", "global", "--iters", "2", "--size", str(short),
+            "--mode", "global", "--iters", "1", "--size", str(short),
         ]
     )  # fmt: skip
     assert code == 0
     result = _applied(tmp_path, photo, optimized / "params.safetensors", "optimized")
     assert (read_image(optimized / "result.png") - result).abs().max() <= ROUNDING
-    fitted = load_params(optimized / "params.safetensors", effect)
-    scores = json.loads((optimized / "metrics.json").read_text())
-    assert scores["ssim"] == pytest.approx(
-        wise.metrics.ssim(render(effect, content, fitted), read_image(target)), abs=0.01
-    )
 
     generator = torch.Generator().manual_seed(3)
     drawn, bench_example = random_reference(effect, content, generator)

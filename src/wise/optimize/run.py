@@ -39,7 +39,7 @@ from wise.optimize.parametric import (
 from wise.optimize.report import write_animation, write_report
 from wise.optimize.settings import NST_METHODS, init_is_file
 from wise.paramfile import load_params, save_params
-from wise.render import Look, render
+from wise.render import render
 from wise.vgg import weights_file
 
 ASPECT_TOLERANCE = 0.01
@@ -158,8 +158,7 @@ def run(
     folder.mkdir(parents=True, exist_ok=True)
 
     frames, every = [], max(1, settings.iterations // ANIMATION_FRAMES)
-    # the working size is fitted as `wise apply` draws it (a small picture enlarged), coarser copies at their own scale
-    levels = pyramid(replace(settings, at_reference=True))
+    levels = pyramid(settings)
     progress = Progress(levels)
 
     def on_step(iteration: int, loss: float, output: torch.Tensor) -> None:
@@ -251,7 +250,7 @@ def _read_steps(
     start = start.reshape(1, -1)
     print("reading the look's steps off the target before descent (seconds)", file=out, flush=True)
     began = time.perf_counter()
-    starts, held = read_starts(effect, content, target, start, at_reference=True)  # as wise apply draws it
+    starts, held = read_starts(effect, content, target, start)
     said = describe_estimates(effect, start, starts[0])
     if len(starts) > 1:
         fitted = describe_estimates(effect, starts[0], starts[1])
@@ -286,12 +285,11 @@ def _kept_start(
     if loss == "nst" or start.dim() > 2:
         return outcome
     start = start.reshape(outcome.params.shape).to(outcome.params)
-    look = Look(effect, content)
-    if closest(effect, content, target, [outcome.params, start], loss, at_reference=True) is outcome.params:
+    if closest(effect, content, target, [outcome.params, start], loss) is outcome.params:
         return outcome
     print("the start re-creates the target better than where descent ended: keeping the start", file=out, flush=True)
     with torch.no_grad():
-        return replace(outcome, params=start, result=look(start))
+        return replace(outcome, params=start, result=effect(content, start))
 
 
 def _distinct(starts: list[torch.Tensor]) -> list[torch.Tensor]:
