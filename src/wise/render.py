@@ -150,6 +150,9 @@ class Look:
         self.source = enlarged(content) if self.enlargement > 1.0 else content
         self.scale = min(self.source.shape[-2:]) / REFERENCE_SHORT_SIDE
         self.medium = self.enlargement if self.enlargement > 1.0 else None
+        # the reduction back to the picture along each side (None: drawn at its own size)
+        self.rows: torch.Tensor | None = None
+        self.columns: torch.Tensor | None = None
         if self.enlargement > 1.0:
             self.rows = reduction_weights(self.source.shape[-2], self.size[0], content)
             self.columns = reduction_weights(self.source.shape[-1], self.size[1], content)
@@ -167,7 +170,7 @@ class Look:
         picture's pipeline reaches that far), at the scale and position of the whole picture.
         The rendered window has the same size wherever the box lies (shifted inward at the
         picture's edges), so that the fused kernels compile once."""
-        if self.enlargement == 1.0:
+        if self.rows is None or self.columns is None:
             rows, columns = None, None
             (r0, r1), (c0, c1) = (top, top + height), (left, left + width)
         else:
