@@ -26,6 +26,7 @@ from wise.optimize.settings import DEFAULT_BUDGET
 from wise.paramfile import save_params
 from wise.ppn.predictor import LocalPredictor, Predictor
 from wise.render import render
+from wise.threads import following_load
 
 RESULT_FILES = ("params.safetensors", "result.png", "metrics.json")
 MASKS_FILE = "masks.png"
@@ -48,6 +49,7 @@ def _scores(
     return result, scores
 
 
+@following_load()
 def predict_files(
     effect_name: str,
     content_path: str,
@@ -144,6 +146,7 @@ def predict_files(
     return scores
 
 
+@following_load()
 def predict_local_files(
     effect_name: str,
     content_path: str,

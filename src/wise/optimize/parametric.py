@@ -30,6 +30,7 @@ from wise.optimize.adam import Adam
 from wise.optimize.settings import PYRAMIDS, Settings
 from wise.params import NORMALIZED_MAX, NORMALIZED_MIN, check_params, clamp_masks, resize_masks
 from wise.render import Look
+from wise.threads import follow_load
 from wise.vgg import StyleLoss, load_vgg19
 
 LAB_WEIGHT = 0.5
@@ -224,6 +225,7 @@ def optimize(
     renders: deque[float] = deque(maxlen=RECENT_ITERATIONS)
     try:
         for iteration in range(1, settings.iterations + 1):
+            follow_load()
             began = time.perf_counter()
             optimizer.zero_grad(set_to_none=True)
             temperature = annealed_temperature(settings.anneal, _progress(settings, iteration, start))
@@ -423,6 +425,7 @@ def optimize_on_crops(
     renders: deque[float] = deque(maxlen=RECENT_ITERATIONS)  # of the whole image, estimated from the crops'
     try:
         for iteration in range(1, settings.iterations + 1):
+            follow_load()
             began = time.perf_counter()
             top, left = _random_box((height, width), crop, generator)
             optimizer.zero_grad(set_to_none=True)
@@ -502,6 +505,7 @@ def optimize_masks_on_crops(
     renders: deque[float] = deque(maxlen=RECENT_ITERATIONS)
     try:
         for iteration in range(1, settings.iterations + 1):
+            follow_load()
             began = time.perf_counter()
             if not windows:
                 windows = _covering_windows((height, width), crop, context, passes, generator)

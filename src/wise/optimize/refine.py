@@ -31,6 +31,7 @@ from wise.optimize.inversion import (
 )
 from wise.optimize.parametric import CROP_CONTEXT, Outcome, Settings, optimize_coarse_to_fine, optimize_on_crops
 from wise.optimize.settings import DEFAULT_BUDGET
+from wise.threads import following_load
 
 
 @dataclass(frozen=True)
@@ -168,9 +169,24 @@ def refine(
     before descent as its ``read`` where the reading changed the start, and the readings from where
     descent ended as its ``settled`` (:func:`answers` names them all). ``max_iterations`` caps
     the iterations, shared out over the levels (at least one each); ``loss`` defaults to the
-    mode's (:data:`REFINE_LOSSES`)."""
+    mode's (:data:`REFINE_LOSSES`). Computes on the cores other programs leave free
+    (:func:`wise.threads.following_load`)."""
     if not budget > 0:
         raise WiseError(f"the refinement budget must be positive, got {budget}")
+    with following_load():
+        return _refine(effect, content, target, start, budget, mode, max_iterations, loss)
+
+
+def _refine(
+    effect: Effect,
+    content: torch.Tensor,
+    target: torch.Tensor,
+    start: torch.Tensor,
+    budget: float,
+    mode: str,
+    max_iterations: int | None,
+    loss: str | None,
+) -> Outcome:
     loss = loss if loss is not None else REFINE_LOSSES.get(mode, "l2")
     _compile_kernels(effect, content, start)
     began = time.perf_counter()

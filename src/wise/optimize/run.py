@@ -168,7 +168,7 @@ def run(
         if iteration % PROGRESS_EVERY == 0 or iteration == settings.iterations:
             print(progress.line(iteration, loss, output), file=out, flush=True)
 
-    with ctrl_c(out) as interruption:
+    with ctrl_c(out) as interruption, following_load():
         starts, between, held = _read_steps(effect, content, target, start_params.to(device), settings.mode, out)
         levels = tuple((reduction, replace(level, held=held)) for reduction, level in levels)
         start_params = _first_level_decides(effect, content, target, starts, levels[0], out)
