@@ -40,6 +40,7 @@ from wise.optimize.report import write_animation, write_report
 from wise.optimize.settings import NST_METHODS, init_is_file
 from wise.paramfile import load_params, save_params
 from wise.render import render
+from wise.threads import following_load
 from wise.vgg import weights_file
 
 ASPECT_TOLERANCE = 0.01
