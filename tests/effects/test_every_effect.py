@@ -5,6 +5,7 @@ import torch
 import torch.nn.functional as F
 
 import wise
+from wise.render import render
 
 EFFECTS = wise.effects.available()
 
@@ -69,3 +70,22 @@ def test_constant_mask_equals_global_parameters(name: str, photo: torch.Tensor) 
         local_out = effect(photo, base[:, :, None, None].expand(-1, -1, 16, 16))
     difference = (global_out - local_out).abs()
     assert difference.mean() < 1e-4 and (difference > 0.05).float().mean() < 1e-3
+
+
+@pytest.fixture(scope="module")
+def photo_256(astronaut: torch.Tensor) -> torch.Tensor:
+    return F.interpolate(astronaut, size=(256, 256), mode="area")
+
+
+@pytest.mark.parametrize("name", ["specular", "shininess"])
+def test_oil_paints_highlights_show_from_minimum_to_maximum(name: str, photo_256: torch.Tensor) -> None:
+    # as a user sees them: rendered as `wise apply` renders, the others mid-range, on a 256-px photo
+    # (every parameter of every effect: benchmarks/bench_medium.py --params)
+    effect = wise.effects.create("oilpaint").eval()
+    index = effect.param_names.index(name)
+    low, high = torch.zeros(1, len(effect.param_specs)), torch.zeros(1, len(effect.param_specs))
+    low[0, index], high[0, index] = -0.5, 0.5
+    with torch.no_grad():
+        change = (render(effect, photo_256, high) - render(effect, photo_256, low)).abs()
+    mean, p99 = float(change.mean()), float(change.flatten().quantile(0.99))
+    assert mean >= 2e-3 or p99 >= 5 / 255, (mean, p99 * 255)

@@ -6,7 +6,7 @@ import torch.nn.functional as F
 from torch.autograd import gradcheck
 
 from wise.errors import WiseError
-from wise.filters.shading import bump_phong
+from wise.filters.shading import bump_phong, phong_highlight
 
 DOUBLE = torch.float64
 
@@ -125,3 +125,13 @@ def test_light_direction_need_not_be_unit() -> None:
     b = bump_phong(color, height, light_direction=(2.0, 4.0, 6.0), scale=1.0)
     assert torch.allclose(a, b)
     assert not math.isnan(a.sum().item())
+
+
+def test_the_highlight_alone_is_bump_phongs_specular_term() -> None:
+    height = _bump(33, 6.0)
+    for light, shininess in (((0.0, -1.0, 1.5), 8.0), ((-1.0, -1.0, 1.0), 30.0)):
+        black = torch.zeros(1, 3, 33, 33, dtype=DOUBLE)
+        specular = bump_phong(black, height, 3.0, light, 0.0, 0.0, 1.0, shininess, scale=1.0)[:, :1]
+        assert torch.allclose(phong_highlight(height, 3.0, light, shininess, scale=1.0), specular)
+    flat = phong_highlight(torch.zeros(1, 1, 9, 9, dtype=DOUBLE), 3.0, (0.0, -1.0, 1.5), 8.0, scale=1.0)
+    assert torch.allclose(flat, torch.full_like(flat, (1.5 / math.hypot(1.0, 1.5)) ** 8.0))

@@ -22,10 +22,10 @@ from wise.filters import (
     rgb_to_lab,
     smoothed_structure_tensor,
 )
-from wise.filters.gaussian import SUPPORT, local_detail
+from wise.filters.gaussian import SUPPORT, gaussian_blur, local_detail
 from wise.filters.log import flow_log
 from wise.filters.noise import value_noise
-from wise.filters.shading import bump_phong
+from wise.filters.shading import bump_phong, phong_highlight
 from wise.filters.upsample import downsample, joint_bilateral_upsample
 
 FLOW_DERIVATIVE = 1.0
@@ -81,12 +81,17 @@ CAVITY_SHADE = 0.2
 """Darkening of the grooves and lightening of the ridges per unit of paint height and relief:
 paint catches ambient light by its height, so strokes of every direction show, also those
 running towards the light."""
-RIDGE_HEIGHT = 0.25
-"""Paint height (``tanh`` of it) above which a stroke's ridge can catch a highlight, rising to full
-at the highest ridges: highlights stay small and sparse instead of a sheen over all the paint."""
+STROKE_BODY_SIGMA = 2.5
+"""Smoothing (reference pixels) of the paint height whose relief the highlights follow: about a
+bristle groove's width, so a highlight runs along a stroke's body."""
+BODY_RELIEF = 2.0
+"""How much steeper the stroke bodies' relief is lit than the smoothed height's slope: smoothing
+flattens the slopes, and a highlight needs a slope that faces the light."""
 LIGHT_DIRECTION = (0.0, -1.0, 1.5)
 """Light from above, in front of the canvas: no side is preferred, so a mirrored picture is lit
 as the mirror of the picture."""
+FLAT_REFLECTION = LIGHT_DIRECTION[2] / math.hypot(*LIGHT_DIRECTION)
+"""``R.V`` of flat paint under :data:`LIGHT_DIRECTION` (the light's height over its length)."""
 
 
 def _low_resolution(value: torch.Tensor) -> torch.Tensor:
@@ -101,8 +106,8 @@ class OilPaint(Effect):
     palette): colour adjustment -> CIE Lab -> smoothed structure tensor and flow ->
     orientation-aligned bilateral abstraction at half resolution -> joint bilateral
     upsampling -> brush texture by flow-based smoothing of noise along and across the
-    strokes -> paint height -> bump mapping with Phong lighting -> flow-based LoG edge
-    enhancement.
+    strokes -> paint height -> bump mapping with Phong lighting, the highlights on the strokes'
+    bodies (the height smoothed) -> flow-based LoG edge enhancement.
     """
 
     name = "oilpaint"
@@ -121,7 +126,7 @@ class OilPaint(Effect):
 
     def halo(self, scale: float) -> int:
         stroke_spec, brush_spec = self.spec("stroke_length"), self.spec("brush_size")
-        texture_reach = SUPPORT * (stroke_spec.max + brush_spec.max) * scale
+        texture_reach = SUPPORT * (stroke_spec.max + brush_spec.max + STROKE_BODY_SIGMA) * scale
         abstraction_reach = ABSTRACTION_FACTOR * (2 * 2 * 2 * self.kernel_size * math.sqrt(2.0) + 4)
         edge_reach = SUPPORT * 2 * EDGE_SIGMA * scale
         variation_reach = SUPPORT * (DETAIL_SIGMA + VARIATION_SIGMA) * scale
@@ -194,20 +199,17 @@ class OilPaint(Effect):
         stroke_length = p["stroke_length"] * (STROKE_FLOOR + (1.0 - STROKE_FLOOR) * structured)
         height = self.paint_height(tangent, stroke_length, p["brush_size"], ctx)
         relief = p["relief"] * (RELIEF_FLOOR + (1.0 - RELIEF_FLOOR) * structured)
-        ridges = (torch.tanh(height) - RIDGE_HEIGHT).clamp_min(0.0) / (1.0 - RIDGE_HEIGHT)
-        # a highlight adds the same to every channel, at most the paint's headroom below white:
+        lit = self.stage(bump_phong, colours, height, relief, LIGHT_DIRECTION, specular=0.0, scale=ctx.medium_scale)
+        # the highlights follow the strokes' bodies (the relief without its bristle grooves), so
+        # that wet paint shines along a stroke instead of glinting on single bristles; a
+        # highlight adds the same to every channel, at most the paint's headroom below white:
         # the hue is kept and no channel clips (bright skin is not washed out)
+        bodies = gaussian_blur(height, STROKE_BODY_SIGMA, scale=ctx.medium_scale)
+        gloss = phong_highlight(bodies, relief * BODY_RELIEF, LIGHT_DIRECTION, p["shininess"], ctx.medium_scale)
+        flat = FLAT_REFLECTION ** p["shininess"]  # what flat paint reflects: it keeps its colour
+        gloss = (gloss - flat).clamp_min(0.0) / (1.0 - flat)
         headroom = 1.0 - colours.amax(dim=1, keepdim=True)
-        lit = self.stage(
-            bump_phong,
-            colours,
-            height,
-            relief,
-            LIGHT_DIRECTION,
-            specular=p["specular"] * ridges * headroom,
-            shininess=p["shininess"],
-            scale=ctx.medium_scale,
-        )
+        lit = lit + p["specular"] * headroom * gloss
         lit = lit * (1.0 + CAVITY_SHADE * relief * torch.tanh(height))
         edges = self.stage(flow_log, abstracted[:, :1] / LUMINANCE_RANGE, tangent, EDGE_SIGMA, scale, MAX_EDGE_STEPS)
         return (lit - p["edge_enhancement"] * edges).clamp(0.0, 1.0)

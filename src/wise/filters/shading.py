@@ -110,3 +110,25 @@ def bump_phong(
     highlight = r_dot_v.clamp_min(POW_FLOOR) ** shininess_map
     shaded = torch.addcmul(specular_map * highlight, color, lighting)
     return shaded.clamp(0.0, 1.0)
+
+
+def phong_highlight(
+    height: torch.Tensor,
+    strength: ParamLike = 1.0,
+    light_direction: tuple[float, float, float] = DEFAULT_LIGHT_DIRECTION,
+    shininess: ParamLike = DEFAULT_SHININESS,
+    scale: float | None = None,
+) -> torch.Tensor:
+    """Phong's (1975) highlight ``max(R.V, 0)^shininess`` of the relief of ``height`` ``(B, 1, H, W)``,
+    ``(B, 1, H, W)`` in [0, 1]: the specular term of :func:`bump_phong` alone, with the same
+    normals, light and viewer, for a highlight that follows another relief than the shading."""
+    check_image(height, "height", channels=1)
+    light_x, light_y, light_z = _unit_light(light_direction)
+    pixels_per_reference = resolution_scale(height) if scale is None else scale
+    strength_map = as_map(strength, height, "strength")
+    dh_dx, dh_dy = height_gradient(height, pixels_per_reference)
+    normal_x, normal_y = -strength_map * dh_dx, -strength_map * dh_dy
+    normal_z = torch.rsqrt(normal_x * normal_x + normal_y * normal_y + 1.0)
+    n_dot_l = (normal_x * light_x + normal_y * light_y + light_z) * normal_z
+    r_dot_v = 2.0 * n_dot_l * normal_z - light_z
+    return r_dot_v.clamp_min(POW_FLOOR) ** as_map(shininess, height, "shininess")
