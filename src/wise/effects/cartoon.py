@@ -77,5 +77,7 @@ class Cartoon(Effect):
         levels = self.stage(quantize, luminance.clamp(0.0, 1.0), p["bins"], p["softness"])
         # the levels' lightness with the abstraction's chroma: a light level of a saturated colour
         # can leave the gamut, and gives up chroma there rather than hue
-        colours = self.recomputed(lab_to_rgb_in_gamut, torch.cat((levels * LUMINANCE_RANGE, abstracted[:, 1:]), dim=1))
+        colours = self.recomputed(
+            lab_to_rgb_in_gamut, torch.cat((levels * LUMINANCE_RANGE, abstracted[:, 1:]), dim=1)
+        )
         return blend(colours, outlines.expand_as(colours), "multiply")

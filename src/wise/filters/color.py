@@ -129,27 +129,18 @@ def lab_to_rgb_in_gamut(lab: torch.Tensor) -> torch.Tensor:
         lab: ``(B, 3, H, W)`` with L in [0, 100]. Returns ``(B, 3, H, W)`` in [0, 1].
     """
     rgb = lab_to_rgb(lab, clip=False)
-    # how far towards the colour from its grey stays inside, found without autograd: the
-    # gradient flows through the colour, scaled by that share (exact inside the gamut)
-    with torch.no_grad():
-        fy = (lab[:, :1] + 16.0) / 116.0
-        cube = fy**3
-        relative_luminance = torch.where(cube > _LAB_EPSILON, cube, (116.0 * fy - 16.0) / _LAB_KAPPA)
-        grey = linear_to_srgb(relative_luminance.clamp_(0.0, 1.0))  # a = b = 0: every channel alike
-        # the grey is the same in every channel, so the channel that leaves first is the
-        # largest (above) or the smallest (below)
-        above = (rgb.amax(dim=1, keepdim=True) - grey).clamp_min_(_GAMUT_EPSILON)
-        below = (grey - rgb.amin(dim=1, keepdim=True)).clamp_min_(_GAMUT_EPSILON)
-        # a hair inside the gamut: the clamp below then cuts no gradient of a colour moved to its edge
-        share = torch.minimum((1.0 - grey) / above, grey / below).mul_(1.0 - _GAMUT_MARGIN).clamp_(max=1.0)
-        grey_part = grey.mul_(1.0 - share)
-    return torch.addcmul(grey_part, rgb, share).clamp_(0.0, 1.0)
+    fy = (lab[:, :1] + 16.0) / 116.0
+    relative_luminance = torch.where(fy**3 > _LAB_EPSILON, fy**3, (116.0 * fy - 16.0) / _LAB_KAPPA)
+    grey = linear_to_srgb(relative_luminance.clamp(0.0, 1.0))  # a = b = 0: the same in every channel
+    offset = rgb - grey
+    room = torch.where(offset > 0, 1.0 - grey, grey)  # how far each channel may go from the grey
+    reach = room / offset.abs().clamp_min(_GAMUT_EPSILON)
+    share = reach.amin(dim=1, keepdim=True).clamp(max=1.0)
+    return (grey + share * offset).clamp(0.0, 1.0)
 
 
 _GAMUT_EPSILON = 1e-6
 """Smallest channel offset from the grey divided by in :func:`lab_to_rgb_in_gamut`."""
-_GAMUT_MARGIN = 1e-5
-"""Share of the way to the gamut's edge that :func:`lab_to_rgb_in_gamut` stops short of."""
 
 
 def rgb_to_hsv(image: torch.Tensor) -> torch.Tensor:
