@@ -3,7 +3,6 @@ import torch
 
 from wise import filters as W
 from wise.errors import WiseError
-from wise.filters import lab_to_rgb, lab_to_rgb_in_gamut, rgb_to_hsv, rgb_to_lab
 
 
 def _pixel(r: float, g: float, b: float) -> torch.Tensor:
@@ -105,18 +104,3 @@ def test_brightness_temperature_and_tint_masks_reach_any_colour() -> None:
     tint = 2.0 * tint / 3.0
     out = W.adjust_color(grey, brightness=float(brightness), temperature=float(temperature), tint=float(tint))
     assert torch.allclose(out.flatten(), wanted, atol=1e-9)
-
-
-def test_a_colour_outside_the_gamut_keeps_its_hue_and_gives_up_chroma() -> None:
-    inside = rgb_to_lab(torch.tensor([0.8, 0.5, 0.3, 0.2, 0.4, 0.9]).view(1, 3, 1, 2))
-    assert torch.allclose(lab_to_rgb_in_gamut(inside), lab_to_rgb(inside), atol=1e-5)  # in gamut: unchanged
-    light_orange = torch.tensor([92.0, 25.0, 60.0]).view(1, 3, 1, 1)  # too saturated for its lightness
-    assert lab_to_rgb(light_orange, clip=False).amax() > 1.0
-    mapped, clipped = lab_to_rgb_in_gamut(light_orange), lab_to_rgb(light_orange)
-    assert mapped.min() >= 0.0 and mapped.max() <= 1.0
-    hue = lambda rgb: float(rgb_to_hsv(rgb)[0, 0])  # noqa: E731
-    original = lab_to_rgb(light_orange * torch.tensor([1.0, 0.3, 0.3]).view(1, 3, 1, 1))  # the hue in gamut
-    assert abs(hue(mapped) - hue(original)) < abs(hue(clipped) - hue(original))
-    assert abs(hue(mapped) - hue(original)) < 0.02
-    grey = torch.tensor([60.0, 0.0, 0.0]).view(1, 3, 1, 1)
-    assert torch.allclose(lab_to_rgb_in_gamut(grey), lab_to_rgb(grey), atol=1e-5)

@@ -16,7 +16,7 @@ from wise.effects.common import (
     flow_pipeline_halo,
     xdog_lines,
 )
-from wise.filters import adjust_color, lab_to_rgb_in_gamut, oriented_bilateral, rgb_to_lab
+from wise.filters import adjust_color, lab_to_rgb, oriented_bilateral, rgb_to_lab
 from wise.filters.composite import blend
 from wise.filters.quantize import quantize
 
@@ -75,9 +75,5 @@ class Cartoon(Effect):
             ctx.scale,
         )
         levels = self.stage(quantize, luminance.clamp(0.0, 1.0), p["bins"], p["softness"])
-        # the levels' lightness with the abstraction's chroma: a light level of a saturated colour
-        # can leave the gamut, and gives up chroma there rather than hue
-        colours = self.recomputed(
-            lab_to_rgb_in_gamut, torch.cat((levels * LUMINANCE_RANGE, abstracted[:, 1:]), dim=1)
-        )
+        colours = self.recomputed(lab_to_rgb, torch.cat((levels * LUMINANCE_RANGE, abstracted[:, 1:]), dim=1))
         return blend(colours, outlines.expand_as(colours), "multiply")

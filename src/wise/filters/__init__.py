@@ -8,7 +8,7 @@ Every filtering operation of the WISE paper's Table 1 is here.
 
 from wise.filters._checks import resolution_scale
 from wise.filters.bilateral import bilateral, bilateral_pass, oriented_bilateral
-from wise.filters.color import adjust_color, hsv_to_rgb, lab_to_rgb, lab_to_rgb_in_gamut, rgb_to_hsv, rgb_to_lab
+from wise.filters.color import adjust_color, hsv_to_rgb, lab_to_rgb, rgb_to_hsv, rgb_to_lab
 from wise.filters.composite import blend, composite
 from wise.filters.dog import flow_dog, flow_smoothing, xdog_threshold
 from wise.filters.gaussian import gaussian_blur
@@ -49,7 +49,6 @@ __all__ = [
     "hsv_to_rgb",
     "joint_bilateral_upsample",
     "lab_to_rgb",
-    "lab_to_rgb_in_gamut",
     "oriented_bilateral",
     "paper_texture",
     "pigment_density",

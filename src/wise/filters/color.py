@@ -119,30 +119,6 @@ def lab_to_rgb(lab: torch.Tensor, clip: bool = True) -> torch.Tensor:
     return rgb.clamp(0.0, 1.0) if clip else rgb
 
 
-def lab_to_rgb_in_gamut(lab: torch.Tensor) -> torch.Tensor:
-    """CIE L*a*b* (D65) to sRGB, a colour outside the sRGB gamut moved towards the grey of its
-    lightness until it is inside (in sRGB), instead of each channel clamped on its own: clamping
-    turns a light, saturated orange pale green or cyan (the channel that overflows stops, the
-    others go on), while this keeps its hue and gives up chroma, as a painter mixes white in.
-
-    Args:
-        lab: ``(B, 3, H, W)`` with L in [0, 100]. Returns ``(B, 3, H, W)`` in [0, 1].
-    """
-    rgb = lab_to_rgb(lab, clip=False)
-    fy = (lab[:, :1] + 16.0) / 116.0
-    relative_luminance = torch.where(fy**3 > _LAB_EPSILON, fy**3, (116.0 * fy - 16.0) / _LAB_KAPPA)
-    grey = linear_to_srgb(relative_luminance.clamp(0.0, 1.0))  # a = b = 0: the same in every channel
-    offset = rgb - grey
-    room = torch.where(offset > 0, 1.0 - grey, grey)  # how far each channel may go from the grey
-    reach = room / offset.abs().clamp_min(_GAMUT_EPSILON)
-    share = reach.amin(dim=1, keepdim=True).clamp(max=1.0)
-    return (grey + share * offset).clamp(0.0, 1.0)
-
-
-_GAMUT_EPSILON = 1e-6
-"""Smallest channel offset from the grey divided by in :func:`lab_to_rgb_in_gamut`."""
-
-
 def rgb_to_hsv(image: torch.Tensor) -> torch.Tensor:
     """RGB in [0, 1] to HSV with hue in [0, 1) (Smith 1978). ``(B, 3, H, W)`` both."""
     check_image(image, channels=3)

@@ -50,7 +50,7 @@ import torch.nn.functional as F
 from wise.effects.base import Effect
 from wise.effects.cartoon import ABSTRACTION_ITERATIONS as CARTOON_PASSES
 from wise.effects.common import COLOUR_ADJUSTMENTS, LUMINANCE_RANGE, detail_sigmas, edge_flow, edge_response, xdog_lines
-from wise.filters import adjust_color, lab_to_rgb, lab_to_rgb_in_gamut, oriented_bilateral, rgb_to_lab
+from wise.filters import adjust_color, lab_to_rgb, oriented_bilateral, rgb_to_lab
 from wise.filters.quantize import MIN_BINS, quantize
 from wise.optimize.adam import Adam
 from wise.optimize.parametric import Settings, closest, image_distance, optimize
@@ -433,7 +433,7 @@ def _rendered_step_errors(sample: _SampledPixels, bins: torch.Tensor, softness: 
     count, pixels = len(bins), luminance.numel()
     levels = quantize(luminance.view(1, 1, 1, pixels).expand(count, 1, 1, pixels), bins, softness)
     lab = torch.cat((levels * LUMINANCE_RANGE, chroma.view(1, 2, 1, pixels).expand(count, 2, 1, pixels)), dim=1)
-    rendered = (lab_to_rgb_in_gamut(lab) * ink.view(1, 1, 1, pixels)).clamp(0.0, 1.0)
+    rendered = (lab_to_rgb(lab) * ink.view(1, 1, 1, pixels)).clamp(0.0, 1.0)
     return (rendered - colours.view(1, 3, 1, pixels)).abs().mean(dim=(1, 2, 3))
 
 
