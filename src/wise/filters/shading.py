@@ -46,6 +46,20 @@ def height_gradient(height: torch.Tensor, scale: float) -> tuple[torch.Tensor, t
     return _central_difference(height, 3) * half_scale, _central_difference(height, 2) * half_scale
 
 
+def _reflection(
+    height: torch.Tensor, strength: torch.Tensor, light: tuple[float, float, float], scale: float
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """``N.L`` and ``R.V`` of the bump-mapped relief of ``height`` under the unit ``light``, seen
+    from V = (0, 0, 1)."""
+    light_x, light_y, light_z = light
+    dh_dx, dh_dy = height_gradient(height, scale)
+    normal_x = -strength * dh_dx
+    normal_y = -strength * dh_dy
+    normal_z = torch.rsqrt(normal_x * normal_x + normal_y * normal_y + 1.0)  # also 1/|(nx, ny, 1)|
+    n_dot_l = (normal_x * light_x + normal_y * light_y + light_z) * normal_z
+    return n_dot_l, 2.0 * n_dot_l * normal_z - light_z
+
+
 def bump_phong(
     color: torch.Tensor,
     height: torch.Tensor,
@@ -100,12 +114,7 @@ def bump_phong(
         half_scale = 0.5 * pixels_per_reference
         return BumpPhong.apply(color, height, strength_map, *maps, shininess_map, light, half_scale, POW_FLOOR)
     ambient_map, diffuse_map, specular_map = maps
-    dh_dx, dh_dy = height_gradient(height, pixels_per_reference)
-    normal_x = -strength_map * dh_dx
-    normal_y = -strength_map * dh_dy
-    normal_z = torch.rsqrt(normal_x * normal_x + normal_y * normal_y + 1.0)  # also 1/|(nx, ny, 1)|
-    n_dot_l = (normal_x * light_x + normal_y * light_y + light_z) * normal_z
-    r_dot_v = 2.0 * n_dot_l * normal_z - light_z
+    n_dot_l, r_dot_v = _reflection(height, strength_map, (light_x, light_y, light_z), pixels_per_reference)
     lighting = ambient_map + diffuse_map * n_dot_l.clamp_min(0.0)
     highlight = r_dot_v.clamp_min(POW_FLOOR) ** shininess_map
     shaded = torch.addcmul(specular_map * highlight, color, lighting)
@@ -123,12 +132,7 @@ def phong_highlight(
     ``(B, 1, H, W)`` in [0, 1]: the specular term of :func:`bump_phong` alone, with the same
     normals, light and viewer, for a highlight that follows another relief than the shading."""
     check_image(height, "height", channels=1)
-    light_x, light_y, light_z = _unit_light(light_direction)
     pixels_per_reference = resolution_scale(height) if scale is None else scale
     strength_map = as_map(strength, height, "strength")
-    dh_dx, dh_dy = height_gradient(height, pixels_per_reference)
-    normal_x, normal_y = -strength_map * dh_dx, -strength_map * dh_dy
-    normal_z = torch.rsqrt(normal_x * normal_x + normal_y * normal_y + 1.0)
-    n_dot_l = (normal_x * light_x + normal_y * light_y + light_z) * normal_z
-    r_dot_v = 2.0 * n_dot_l * normal_z - light_z
+    _, r_dot_v = _reflection(height, strength_map, _unit_light(light_direction), pixels_per_reference)
     return r_dot_v.clamp_min(POW_FLOOR) ** as_map(shininess, height, "shininess")
