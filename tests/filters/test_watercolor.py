@@ -11,9 +11,11 @@ from wise.filters.watercolor import (
     feature_accents,
     gaps_overlaps,
     pigment_density,
+    wash_lightness,
     wet_in_wet,
     wobble,
 )
+from wise.filters import adjust_color
 
 
 @pytest.fixture(autouse=True, scope="module")
@@ -273,3 +275,27 @@ def test_a_strong_rim_darkens_to_at_most_the_colour_squared() -> None:
     out = edge_darkening(image, 3.0, scale=1.0)
     assert bool((out >= image * image - 1e-6).all())
     assert float(out[0, 0, 16, 16]) < 0.45  # still a visible rim on the skin's side
+
+
+def test_wash_lightness_keeps_the_hue_of_highlights_that_a_brightness_clips() -> None:
+    # a skin's highlight and the skin around it, as in the astronaut photo
+    skin = torch.tensor([[0.97, 0.85, 0.81], [0.83, 0.70, 0.62]]).reshape(1, 2, 3).permute(0, 2, 1)[..., None]
+    clipped = adjust_color(skin, brightness=0.08)
+    assert float(clipped[0, 0, 0, 0]) == 1.0  # the highlight's red clips: it turns whiter than the skin
+    for amount in (0.08, 0.3, 1.0):
+        lighter = wash_lightness(skin, amount)
+        assert float(lighter.max()) < 1.0 and bool((lighter > skin).all())
+        # every colour's distance to white shrinks by one factor: the hue and the skin's ratios stay
+        ratio = (1.0 - lighter) / (1.0 - skin)
+        assert torch.allclose(ratio, ratio[0, 0, 0, 0].expand_as(ratio), atol=1e-6)
+    mid_grey = torch.full((1, 3, 1, 1), 0.5)
+    assert float(wash_lightness(mid_grey, 0.02)[0, 0]) == pytest.approx(0.52, abs=1e-3)  # as a brightness of 0.02
+    darker = wash_lightness(skin, -0.3)
+    assert torch.allclose(darker / skin, (darker / skin)[0, 0, 0, 0].expand_as(skin), atol=1e-6)
+    assert bool((darker < skin).all()) and torch.equal(wash_lightness(skin, 0.0), skin)
+
+
+def test_wash_lightness_gradients() -> None:
+    image = rand(1, 3, 4, 5, low=0.05, high=0.95)
+    amount = (torch.rand(1, 1, 4, 5, dtype=torch.float64) - 0.5).requires_grad_(True)
+    _check(wash_lightness, image, amount)

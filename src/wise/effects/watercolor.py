@@ -24,7 +24,7 @@ from wise.filters import (
     smoothed_structure_tensor,
 )
 from wise.filters.composite import blend
-from wise.filters.gaussian import SUPPORT
+from wise.filters.gaussian import SUPPORT, gaussian_blur
 from wise.filters.kuwahara import anisotropic_kuwahara
 from wise.filters.noise import paper_texture, value_noise
 from wise.filters.upsample import downsample, joint_bilateral_upsample
@@ -35,6 +35,7 @@ from wise.filters.watercolor import (
     gaps_overlaps,
     paper_shading,
     pigment_density,
+    wash_lightness,
     wet_in_wet,
     wobble,
 )
@@ -68,6 +69,8 @@ TREMOR_CELL = 10.0
 TREMOR_AMPLITUDE = 2.0
 """Height of the tremor added to the paper for the wobbling: about 1.5 reference pixels of
 displacement at ``wobble`` 1."""
+WOBBLE_PAPER_SMOOTHING = 1.0
+"""Smoothing of the paper before its slope displaces the washes (reference pixels of the medium)."""
 WOBBLE_GAIN = 8.0
 """The paper's slope is about 1/8 per reference pixel: one unit of ``wobble`` then shifts the
 washes by about one reference pixel."""
@@ -93,7 +96,7 @@ class Watercolor(Effect):
     """Watercolor: flat washes whose pigment pools at the edges, bleeds, wobbles and settles
     into the paper.
 
-    Pipeline: colour adjustment -> structure tensor and flow -> anisotropic Kuwahara
+    Pipeline: colour adjustment -> wash lightness -> structure tensor and flow -> anisotropic Kuwahara
     abstraction -> wet-in-wet bleeding across edges -> flat washes (soft tone quantization)
     -> wobbling by the paper texture and hand tremor -> edge darkening -> pigment
     turbulence, dispersion and paper granulation (pigment density) -> gaps and overlaps at
@@ -118,7 +121,7 @@ class Watercolor(Effect):
         flow_reach = FLOW_DERIVATIVE + SUPPORT * FLOW_SMOOTHING
         abstraction_reach = KUWAHARA_MAX_STRETCH * self.spec("abstraction").max
         bleeding_reach = 1.5 * self.spec("bleeding").max
-        texture_reach = WOBBLE_GAIN * self.spec("wobble").max / 4.0 + 4.0
+        texture_reach = WOBBLE_GAIN * self.spec("wobble").max / 4.0 + 4.0 + SUPPORT * WOBBLE_PAPER_SMOOTHING
         contour_reach = SUPPORT * float(detail_sigmas(torch.tensor(CONTOUR_DETAILS))["edge_smoothing"])
         accent_reach = SUPPORT * ACCENT_SURROUNDINGS  # the accents read the finished washes around a pixel
         reach = flow_reach + max(abstraction_reach + bleeding_reach + texture_reach + accent_reach, contour_reach)
@@ -160,7 +163,9 @@ class Watercolor(Effect):
     def render(self, image: torch.Tensor, p: Mapping[str, torch.Tensor], ctx: RenderContext) -> torch.Tensor:
         scale, origin, seed = ctx.scale, ctx.origin, self.seed
 
-        adjusted = self.recomputed(adjust_color, image, **colour_adjustments(p))
+        # the brightness thins or thickens the washes instead of adding to the photo's colours
+        balanced = self.recomputed(adjust_color, image, **{**colour_adjustments(p), "brightness": 0.0})
+        adjusted = self.recomputed(wash_lightness, balanced, p["brightness"])
         luminance = self.recomputed(rgb_to_lab, adjusted)[:, :1]
         structure = self.stage(smoothed_structure_tensor, luminance, FLOW_DERIVATIVE, FLOW_SMOOTHING, scale)
         tangent = edge_tangent_flow(structure)
@@ -178,7 +183,10 @@ class Watercolor(Effect):
         reduction = WASH_REDUCTION if scale >= WASH_REDUCTION_FROM_SCALE else 1
         bled = self._washes(adjusted, structure, edges, turbulence_noise, p, scale, reduction)
         flat = self.stage(flat_washes, bled, luminance / LUMINANCE_RANGE, p["flatness"], scale=scale)
-        trembling_paper = paper + TREMOR_AMPLITUDE * tremor
+        # the washes waver along the paper's bumps and fibres; its finest tooth would break their
+        # boundaries into specks that the rims then darken
+        paper_bumps = gaussian_blur(paper, WOBBLE_PAPER_SMOOTHING, scale=ctx.medium_scale)
+        trembling_paper = paper_bumps + TREMOR_AMPLITUDE * tremor
         # one displacement for both: the washes before flattening guide the rims
         wobbled, wobbled_washes = self.stage(
             wobble, torch.cat((flat, bled), dim=1), trembling_paper, WOBBLE_GAIN * p["wobble"], scale

@@ -54,6 +54,9 @@ SHARPEST_WASH = 0.12
 """Ramp half-widths (bin widths) of the wash quantization at flatness 0 and 1."""
 PAPER_SHADE = 0.15
 """Darkening of the paper's deepest valleys at full paper visibility."""
+WASH_LIGHTNESS_GAIN = 2.0
+"""Rate of :func:`wash_lightness`: at mid-grey a small ``amount`` adds about ``amount``, as the
+additive brightness of :func:`wise.filters.adjust_color` does."""
 _SELECTION_EPS = 1e-6
 """Keeps the soft choice between the two sides of an edge finite where both sides agree."""
 _MAGNITUDE_EPS = 1e-4
@@ -100,6 +103,29 @@ def pigment_density(image: torch.Tensor, density: ParamLike) -> torch.Tensor:
     check_image(image)
     d = as_map(density, image, "density")
     return image - (image - image * image) * (d - 1.0)
+
+
+def wash_lightness(image: torch.Tensor, amount: ParamLike) -> torch.Tensor:
+    """Lighter or darker washes that keep their hue: a thinner wash lets the paper through,
+    ``C' = 1 - (1 - C) exp(-k a)`` for ``a > 0``; a thicker one darkens towards black,
+    ``C' = C exp(k a)`` for ``a < 0`` (``k`` = :data:`WASH_LIGHTNESS_GAIN`).
+
+    An offset added to every channel and clamped, as a brightness is, turns a skin's highlight
+    white where its red channel reaches 1 while the rest of the skin keeps its hue, so the
+    highlight reads as a bluish blotch; here every colour moves by the same share of its distance
+    to white, so no channel clips and the hue of highlights stays that of their surroundings.
+
+    Args:
+        image: ``(B, C, H, W)`` colours in [0, 1].
+        amount: in [-1, 1]; a float, ``(B,)`` or ``(B, 1, H, W)``. 0 leaves the image unchanged.
+
+    Returns:
+        ``(B, C, H, W)`` in [0, 1].
+    """
+    check_image(image)
+    a = as_map(amount, image, "amount")
+    lighter = PAPER_WHITE - (PAPER_WHITE - image) * torch.exp(-WASH_LIGHTNESS_GAIN * a.clamp(min=0.0))
+    return lighter * torch.exp(WASH_LIGHTNESS_GAIN * a.clamp(max=0.0))
 
 
 def edge_darkening(

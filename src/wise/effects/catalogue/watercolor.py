@@ -30,7 +30,7 @@ PARAMS = (
 
 PRESETS = {
     "wet": {
-        "brightness": 0.06,
+        "brightness": 0.08,
         "contrast": 1.0,
         "saturation": 1.25,
         "abstraction": 7.0,
