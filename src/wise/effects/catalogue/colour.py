@@ -17,6 +17,8 @@ WHITE_BALANCE = (
 """The white-balance parameters of the colour effects (:func:`wise.filters.adjust_color`)."""
 
 
-def brightness_spec(low: float, high: float, default: float) -> ParamSpec:
+def brightness_spec(
+    low: float, high: float, default: float, description: str = "added to the input colours"
+) -> ParamSpec:
     """The colour effects' ``brightness`` over an effect's own slider range, with the colour offsets' reach."""
-    return ParamSpec("brightness", low, high, default, "added to the input colours", reach=COLOUR_OFFSET_REACH)
+    return ParamSpec("brightness", low, high, default, description, reach=COLOUR_OFFSET_REACH)

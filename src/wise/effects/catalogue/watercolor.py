@@ -10,7 +10,7 @@ SUMMARY = "Watercolor: flat washes whose pigment pools at the edges, bleeds, wob
 """The first line of the effect's description (``wise effects``)."""
 
 PARAMS = (
-    brightness_spec(-0.2, 0.3, 0.05),
+    brightness_spec(-0.2, 0.3, 0.05, "lighter (thinner) or darker (thicker) washes"),
     ParamSpec("contrast", 0.5, 2.0, 1.0, "contrast of the input around mid-grey"),
     ParamSpec("saturation", 0.0, 2.0, 1.15, "colour saturation"),
     *WHITE_BALANCE,
@@ -62,7 +62,7 @@ PRESETS = {
         "contour": 0.15,
     },
     "pale": {
-        "brightness": 0.08,
+        "brightness": 0.12,
         "contrast": 0.95,
         "saturation": 1.3,
         "abstraction": 8.0,
