@@ -15,6 +15,10 @@ portrait's height and width (the NPRportrait photo of ``shared/data/portrait.png
 - **Watercolor, dark pixels in the face**: the share of the face ellipse's pixels whose
   luminance ends at least 0.12 below that of the photo blurred by 2 pixels (the photo itself
   against its own blur: the baseline of eyes and lashes).
+- **Watercolor, pale blotches in the face**: the share of the face ellipse's pixels whose chroma
+  (CIE C*ab, averaged over 5 pixels) lies more than 6 below that of their surroundings (a Gaussian
+  of 12 pixels): highlights that lost the skin's hue (the photo's own freckles and highlights
+  are the baseline).
 - **XDoG sketch**: the share of dark pixels (luminance below 0.5) and the darkest 32-pixel block.
 """
 
@@ -27,10 +31,12 @@ import argparse
 import json
 from pathlib import Path
 
+import numpy as np
 import torch
 import torch.nn.functional as F
 from PIL import Image
-from skimage import data
+from scipy import ndimage
+from skimage import color, data
 
 from wise.filters import gaussian_blur
 from wise.io import image_to_tensor, read_image, tensor_to_image
@@ -49,6 +55,9 @@ CROP_BOX = (0.27, 0.70, 0.22, 0.75)
 """The face at 100 % for the before/after pictures."""
 DARKER_BY = 0.12
 PHOTO_BLUR = 2.0
+CHROMA_DIP = 6.0
+CHROMA_LOCAL = 5
+CHROMA_SURROUNDINGS = 12.0
 DARK_LUMINANCE = 0.5
 BLOCK = 32
 
@@ -95,6 +104,14 @@ def dark_share(result: torch.Tensor, photo: torch.Tensor) -> float:
     return float(darker[face_mask(photo)].float().mean())
 
 
+def pale_share(result: torch.Tensor, photo: torch.Tensor) -> float:
+    """Share of the face's pixels whose chroma lies :data:`CHROMA_DIP` below their surroundings'."""
+    lab = color.rgb2lab(result[0].clamp(0.0, 1.0).permute(1, 2, 0).double().numpy())
+    chroma = np.hypot(lab[..., 1], lab[..., 2])
+    dip = ndimage.uniform_filter(chroma, CHROMA_LOCAL) - ndimage.gaussian_filter(chroma, CHROMA_SURROUNDINGS)
+    return float((dip[face_mask(photo).numpy()] < -CHROMA_DIP).mean())
+
+
 def sketch_darkness(drawing: torch.Tensor) -> tuple[float, float]:
     """Share of dark pixels and the darkest :data:`BLOCK`-pixel block's share."""
     dark = (drawing.mean(dim=1, keepdim=True) < DARK_LUMINANCE).float()
@@ -134,14 +151,18 @@ def main() -> None:
         print(f"| {preset} | " + " | ".join(f"{v:.2f}" for v in rows.values()) + " |")
 
     water = wise.effects.create("watercolor").eval()
-    baseline = dark_share(portrait, portrait)
+    baseline = {"darker": dark_share(portrait, portrait), "pale": pale_share(portrait, portrait)}
     results["watercolor"]["photo"] = baseline
-    print(f"\n| watercolor preset | face pixels {DARKER_BY} darker |\n| --- | --- |\n| (the photo) | {baseline:.2%} |")
+    print(
+        f"\n| watercolor preset | face pixels {DARKER_BY} darker | face pixels paler than their surroundings |"
+        f"\n| --- | --- | --- |\n| (the photo) | {baseline['darker']:.2%} | {baseline['pale']:.2%} |"
+    )
     for preset in water.presets if "watercolor" in only else ():
         result = _render(water, portrait, preset)
         renders.append((f"watercolor {preset}", result))
-        results["watercolor"][preset] = dark_share(result, portrait)
-        print(f"| {preset} | {results['watercolor'][preset]:.2%} |")
+        rows = {"darker": dark_share(result, portrait), "pale": pale_share(result, portrait)}
+        results["watercolor"][preset] = rows
+        print(f"| {preset} | {rows['darker']:.2%} | {rows['pale']:.2%} |")
 
     xdog = wise.effects.create("xdog").eval()
     photos = {"portrait": portrait, "astronaut": resized(image_to_tensor(data.astronaut()))}
