@@ -46,6 +46,7 @@ def step_rate(effect: str, architecture: str, loss: str, args: argparse.Namespac
     batch = {
         "photo": torch.rand(args.batch, 3, args.window, args.window, device=args.device),
         "example": torch.rand(args.batch, 3, args.window, args.window, device=args.device),
+        "target": torch.rand(args.batch, 3, args.window, args.window, device=args.device),
         "params": torch.rand(args.batch, count, device=args.device) - 0.5,
     }
 
